@@ -1,0 +1,195 @@
+"""Configuration: frozen dataclasses grouped by subsystem, loaded from YAML with ``section.key=value`` overrides.
+
+Every value carries its unit in its name (``_m``, ``_Pa``, ``_deg`` ...) or in its comment. The defaults here are
+the single source of truth; ``configs/default.yaml`` lists them for reading and is checked against them in the tests.
+
+Errors: an unknown section or key, a value of the wrong type, or a physically invalid value (negative stiffness,
+pressure, ...) raises :class:`ConfigError` with one message that names the offending key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+
+
+class ConfigError(ValueError):
+    """Invalid configuration: the message names the key and what is wrong with it."""
+
+
+@dataclass(frozen=True)
+class KiteConfig:
+    name: str = "rhino16"  # kite geometry: rhino16 | v3
+    n_sections: int = 37  # spanwise sections (odd) [-]
+    n_chord: int = 6  # chordwise load points per section [-]
+
+
+@dataclass(frozen=True)
+class StructureConfig:
+    # canopy: isotropic linear ripstop (paper, Sect. II.A)
+    canopy_E_Pa: float = 1.25e9  # Young's modulus [Pa]
+    canopy_nu: float = 0.3  # Poisson ratio [-]
+    canopy_thickness_m: float = 0.08e-3  # [m]
+    wrinkling: bool = True  # tension-field membrane (no compressive membrane stress)
+    # inflated tubes (LE, struts): Breukels' correlations (physics_facts.md 2); 0.3 bar = V3 flight pressure (4.3)
+    tube_pressure_Pa: float = 0.3e5  # gauge pressure [Pa]
+    # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public (physics_facts 4.5):
+    # modelling choice of twice the canopy's membrane stiffness E h = 1e5 N/m (tube fabric is a heavier cloth).
+    tube_wall_Et_N_per_m: float = 2.0e5  # [N/m]
+    # tip beams ("thin stiff beam", Sect. II.A): a solid glass-fibre rod (modelling choice), diameter from the mesh
+    tip_rod_E_Pa: float = 30.0e9  # [Pa]
+    # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
+    te_wire_E_Pa: float = 5.5e8  # [Pa]
+
+
+@dataclass(frozen=True)
+class AeroConfig:
+    rho_kg_m3: float = 1.225  # air density, sea level (physics_facts 4.2) [kg/m^3]
+
+
+@dataclass(frozen=True)
+class FsiConfig:
+    tol_disp_m: float = 1.0e-4  # coupling: max nodal position change between coupling iterations [m]
+    tol_force_rel: float = 1.0e-3  # coupling: change of aero load vector relative to its norm [-]
+    max_coupling_iter: int = 60  # [-]
+    cold_load_steps: int = 6  # dynamic-pressure ramp for a cold start from the unloaded wing [-]
+
+
+@dataclass(frozen=True)
+class Config:
+    kite: KiteConfig = field(default_factory=KiteConfig)
+    structure: StructureConfig = field(default_factory=StructureConfig)
+    aero: AeroConfig = field(default_factory=AeroConfig)
+    fsi: FsiConfig = field(default_factory=FsiConfig)
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        return dataclasses.asdict(self)
+
+
+# values that must be strictly positive (everything else numeric must be finite)
+_POSITIVE = {
+    "kite.n_sections", "kite.n_chord", "structure.canopy_E_Pa", "structure.canopy_thickness_m",
+    "structure.tube_pressure_Pa", "structure.tube_wall_Et_N_per_m", "structure.tip_rod_E_Pa", "structure.te_wire_E_Pa",
+    "aero.rho_kg_m3", "fsi.tol_disp_m", "fsi.tol_force_rel", "fsi.max_coupling_iter", "fsi.cold_load_steps",
+}
+
+
+def _coerce(key: str, value: Any, default: Any) -> Any:
+    """Convert ``value`` to the type of ``default`` or raise a ConfigError naming ``key``."""
+    typ = type(default)
+    if typ is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
+            return value.lower() in ("true", "1", "yes")
+        raise ConfigError(f"config key '{key}' expects true/false, got {value!r}")
+    if typ is int:
+        if isinstance(value, bool):
+            raise ConfigError(f"config key '{key}' expects an integer, got {value!r}")
+        try:
+            f = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"config key '{key}' expects an integer, got {value!r}") from None
+        if not f.is_integer():
+            raise ConfigError(f"config key '{key}' expects an integer, got {value!r}")
+        return int(f)
+    if typ is float:
+        if isinstance(value, bool):
+            raise ConfigError(f"config key '{key}' expects a number, got {value!r}")
+        try:
+            f = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"config key '{key}' expects a number, got {value!r}") from None
+        if not math.isfinite(f):
+            raise ConfigError(f"config key '{key}' must be finite, got {value!r}")
+        return f
+    if typ is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"config key '{key}' expects a string, got {value!r}")
+        return value
+    return value
+
+
+def _parse_scalar(text: str) -> Any:
+    """Parse the right-hand side of a ``--set key=value`` override like a YAML scalar."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def config_from_dict(data: dict[str, Any] | None, base: Config | None = None) -> Config:
+    """Build a validated Config from nested ``{section: {key: value}}`` on top of ``base`` (defaults if None)."""
+    base = base or Config()
+    data = data or {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"config must be a mapping of sections, got {type(data).__name__}")
+    sections = {f.name: getattr(base, f.name) for f in fields(base)}
+    for sec_name, values in data.items():
+        if sec_name not in sections:
+            raise ConfigError(f"unknown config section '{sec_name}' (valid: {', '.join(sections)})")
+        if values is None:
+            continue
+        if not isinstance(values, dict):
+            raise ConfigError(f"config section '{sec_name}' must be a mapping, got {values!r}")
+        sec = sections[sec_name]
+        valid = {f.name: f for f in fields(sec)}
+        updates = {}
+        for key, value in values.items():
+            if key not in valid:
+                raise ConfigError(f"unknown config key '{sec_name}.{key}' (valid: {', '.join(valid)})")
+            updates[key] = _coerce(f"{sec_name}.{key}", value, getattr(sec, key))
+        sections[sec_name] = dataclasses.replace(sec, **updates)
+    cfg = Config(**sections)
+    _validate(cfg)
+    return cfg
+
+
+def _validate(cfg: Config) -> None:
+    for sec_f in fields(cfg):
+        sec = getattr(cfg, sec_f.name)
+        for f in fields(sec):
+            key = f"{sec_f.name}.{f.name}"
+            v = getattr(sec, f.name)
+            if key in _POSITIVE and not v > 0:
+                raise ConfigError(f"config key '{key}' must be positive, got {v!r}")
+    if not -1.0 < cfg.structure.canopy_nu < 0.5:
+        raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
+    if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 5:
+        raise ConfigError(f"config key 'kite.n_sections' must be odd and >= 5, got {cfg.kite.n_sections}")
+    if cfg.kite.n_chord < 3:
+        raise ConfigError(f"config key 'kite.n_chord' must be >= 3, got {cfg.kite.n_chord}")
+
+
+def parse_overrides(overrides: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """``["fsi.tol_disp_m=1e-5", ...]`` -> nested dict; malformed entries raise ConfigError."""
+    out: dict[str, dict[str, Any]] = {}
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override '{item}' must look like section.key=value")
+        lhs, rhs = item.split("=", 1)
+        parts = lhs.strip().split(".")
+        if len(parts) != 2 or not all(parts):
+            raise ConfigError(f"override '{item}' must look like section.key=value")
+        out.setdefault(parts[0], {})[parts[1]] = _parse_scalar(rhs.strip())
+    return out
+
+
+def load_config(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Config:
+    """Load defaults, then the YAML file at ``path`` (if given), then ``section.key=value`` overrides."""
+    cfg = Config()
+    if path is not None:
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"config file '{p}' does not exist")
+        try:
+            data = yaml.safe_load(p.read_text())
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"config file '{p}' is not valid YAML: {exc}") from None
+        cfg = config_from_dict(data, cfg)
+    return config_from_dict(parse_overrides(overrides), cfg)

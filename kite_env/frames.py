@@ -1,0 +1,44 @@
+"""The reference frames of the model (Bosch et al., Sect. II; defined here and nowhere else).
+
+* Wind frame W: inertial; origin at the tether's ground attachment, ``x_w`` along the wind velocity ``v_w``,
+  ``z_w`` up (perpendicular to the ground), ``y_w = z_w × x_w``.
+* Kite frame K (Sect. II.A, Fig. 3): moves with the kite; origin ``r_k`` at the midpoint of the leading-edge bridle
+  points A (right tip) and C (left tip); ``y_k`` points from C to A; ``x_k`` points towards the midpoint of the
+  trailing-edge bridle points B and D, orthogonalised against ``y_k``; ``z_k = x_k × y_k`` (away from the bridle,
+  the direction into which the loaded wing centre is pushed). The structural and aerodynamic models work in K.
+* Section frames i (Sect. II.B, Fig. 4): origin at the section's leading-edge node, ``x`` towards its trailing-edge
+  node, ``y`` spanwise (perpendicular to the airfoil plane, towards the right tip), ``z = x × y``
+  (built in :mod:`kite_env.aero.sections`).
+
+Rotation matrices ``R_wk`` have the K axes as columns expressed in W: ``v_w = R_wk @ v_k``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def kite_frame(pos_a: np.ndarray, pos_b: np.ndarray, pos_c: np.ndarray, pos_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origin and orientation of frame K from the bridle points A, B, C, D (each ``(..., 3)`` in any frame F).
+
+    Returns ``origin (..., 3)`` and ``R (..., 3, 3)`` whose columns are ``x_k, y_k, z_k`` expressed in F.
+    """
+    pos_a, pos_b, pos_c, pos_d = (np.asarray(p, dtype=float) for p in (pos_a, pos_b, pos_c, pos_d))
+    origin = 0.5 * (pos_a + pos_c)
+    ey = pos_a - pos_c
+    ey = ey / np.linalg.norm(ey, axis=-1, keepdims=True)
+    ex = 0.5 * (pos_b + pos_d) - origin
+    ex = ex - np.sum(ex * ey, axis=-1, keepdims=True) * ey
+    ex = ex / np.linalg.norm(ex, axis=-1, keepdims=True)
+    ez = np.cross(ex, ey)
+    return origin, np.stack([ex, ey, ez], axis=-1)
+
+
+def to_frame(vec: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Components in frame K of vectors given in F, for ``R`` from :func:`kite_frame` (``R.T @ vec``)."""
+    return np.einsum("...ji,...j->...i", R, vec)
+
+
+def from_frame(vec_k: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Components in F of vectors given in K (``R @ vec_k``)."""
+    return np.einsum("...ij,...j->...i", R, vec_k)

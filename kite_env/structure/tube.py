@@ -1,0 +1,128 @@
+"""Inflated-tube section law: bending and torsion stiffness of a pressurised tube (Breukels 2011).
+
+The paper models the LE tube and struts with beam elements whose bending stiffness ``EI(p, d, q)`` depends on the
+inflation pressure ``p``, the tube diameter ``d`` and the deflection ``q`` (Sect. II.A, "correlations derived in
+[9] by fitting to experimental data"). The correlations are those of Breukels' thesis for a 1 m inflated cantilever
+(physics_facts.md section 2, sources [S4] kite_fem and [S5] Billow); the constants C1..C19 are transcribed there.
+
+Units: Breukels' fits take the gauge pressure in **bar** and the radius ``r = d/2`` in m. Everything outside this
+module is SI: pressures in Pa are converted here and nowhere else.
+
+Moment-curvature reading (Billow's energy-consistent re-interpretation, physics_facts 2.4): a 1 m cantilever with a
+tip load ``P`` and tip deflection ``v`` has root moment ``M = P L`` and root curvature ``kappa = 3 v / L``. The
+load-deflection law ``P(v) = D (1 - exp(-(N/D) v))`` therefore becomes::
+
+    M(kappa) = M_max (1 - exp(-EI0 kappa / M_max)),    EI0 = N / 3,   M_max = D * 1 m
+    T(phi)   = c1 arctan(c2 phi)                        GJ0 = c1 c2    (phi = twist per metre)
+
+The beam element uses the *secant* stiffness ``EI = M(kappa) / kappa`` and ``GJ = T(phi) / phi`` of its current
+curvature and twist, updated between coupling iterations (the paper's "deflection-dependent cross-sectional
+properties"). Collapse (local wrinkling through the tube) is flagged when the equivalent cantilever deflection
+``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the post-collapse state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+PA_PER_BAR = 1.0e5
+
+# Breukels' inflated-beam constants (physics_facts.md 2.1-2.3) [S4, S5]
+C1, C2, C3, C4 = 6582.82, -272.43, 40852.38, 14.31
+C5, C6, C7, C8 = 271865251.42, 215.93, 14021.79, -589.05
+C9, C10, C11, C12 = 322.55, 0.0239, 5.3833, 0.0461
+C13, C14, C15, C16, C17, C18, C19 = 1467.0, 40.908, -191.8, 47.406, -17703.0, 358.05, 0.0918
+
+#: Length of Breukels' calibration cantilever [m].
+L_CAL = 1.0
+#: Curvature [1/m] and twist [rad/m] below which the secant equals the initial stiffness (avoids 0/0).
+_TINY = 1e-9
+
+
+@dataclass(frozen=True)
+class TubeProperties:
+    """Pressure- and diameter-dependent constants of Breukels' correlations, per tube element.
+
+    Attributes (all ``(n,)`` float): ``M_max`` [N m] limit bending moment, ``EI0`` [N m^2] initial bending
+    stiffness, ``kappa_collapse`` [1/m] curvature at collapse, ``c1`` [N m], ``c2`` [m/rad] torsion constants,
+    ``GJ0`` [N m^2] initial torsion stiffness.
+    """
+
+    M_max: np.ndarray
+    EI0: np.ndarray
+    kappa_collapse: np.ndarray
+    c1: np.ndarray
+    c2: np.ndarray
+    GJ0: np.ndarray
+
+
+def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray) -> TubeProperties:
+    """Evaluate Breukels' correlations for tubes of diameter ``diameter_m`` [m] at gauge pressure ``pressure_pa`` [Pa].
+
+    Raises ``ValueError`` where the fit gives a non-physical (non-positive) stiffness or strength: Breukels' fits
+    degrade for small tubes (C2, C8 < 0; physics_facts 2.4), and silently clipping would hide that.
+    """
+    p = np.asarray(pressure_pa, dtype=float) / PA_PER_BAR  # Breukels' fits use bar
+    d = np.asarray(diameter_m, dtype=float)
+    if np.any(p <= 0.0):
+        raise ValueError(f"tube pressure must be positive, got {np.min(p) * PA_PER_BAR:g} Pa")
+    if np.any(d <= 0.0):
+        raise ValueError(f"tube diameter must be positive, got {np.min(d):g} m")
+    r = 0.5 * d
+    D = (C1 * r + C2) * p**2 + (C3 * r**3 + C4)  # limit tip load of the 1 m cantilever [N] (2.1)
+    N = (C5 * r**5 + C6) * p + (C7 * r + C8)  # initial slope dP/dv [N/m] (2.1)
+    v_col = (C9 * r**4 + C10) * p + C11 * r**2 + C12  # collapse tip deflection [m] (2.2)
+    c1 = (C13 * r + C14) * p + (C15 * r + C16)  # [N m] (2.3)
+    c2 = C17 * r**4 * np.log(p) + (C18 * r**3 + C19)  # [m/rad] (2.3)
+    D, N, v_col, c1, c2 = np.broadcast_arrays(D, N, v_col, c1, c2)
+    bad = (D <= 0) | (N <= 0) | (c1 <= 0) | (c2 <= 0) | (v_col <= 0)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad.ravel())[0])
+        raise ValueError(
+            f"Breukels' tube correlations are non-physical for d = {np.broadcast_to(d, D.shape).ravel()[i]:.4f} m at "
+            f"p = {np.broadcast_to(p, D.shape).ravel()[i]:.3f} bar (limit load {D.ravel()[i]:.3g} N, slope {N.ravel()[i]:.3g} N/m, "
+            f"torsion c1 {c1.ravel()[i]:.3g}, c2 {c2.ravel()[i]:.3g}); the fits are calibrated for ~0.1-0.3 m tubes at 0.1-1 bar"
+        )
+    EI0 = N * L_CAL**3 / 3.0  # cantilever: v = P L^3 / (3 EI)
+    return TubeProperties(
+        M_max=D * L_CAL,
+        EI0=EI0,
+        kappa_collapse=3.0 * v_col / L_CAL**2,
+        c1=c1,
+        c2=c2,
+        GJ0=c1 * c2,
+    )
+
+
+def bending_moment(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
+    """Bending moment [N m] at curvature ``kappa`` [1/m] (odd in kappa)."""
+    k = np.asarray(kappa, dtype=float)
+    return np.sign(k) * props.M_max * (1.0 - np.exp(-props.EI0 * np.abs(k) / props.M_max))
+
+
+def torque(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
+    """Torque [N m] at twist per unit length ``phi`` [rad/m]."""
+    return props.c1 * np.arctan(props.c2 * np.asarray(phi, dtype=float))
+
+
+def secant_EI(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
+    """Secant bending stiffness ``M(kappa)/kappa`` [N m^2]; equals ``EI0`` as ``kappa -> 0``."""
+    k = np.abs(np.asarray(kappa, dtype=float))
+    x = props.EI0 * k / props.M_max
+    # (1 - exp(-x)) / x with its series for small x
+    ratio = np.where(x < 1e-6, 1.0 - 0.5 * x, -np.expm1(-np.maximum(x, 1e-300)) / np.maximum(x, 1e-300))
+    return props.EI0 * ratio
+
+
+def secant_GJ(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
+    """Secant torsion stiffness ``T(phi)/phi`` [N m^2]; equals ``GJ0`` as ``phi -> 0``."""
+    y = props.c2 * np.abs(np.asarray(phi, dtype=float))
+    ratio = np.where(y < 1e-6, 1.0 - y**2 / 3.0, np.arctan(y) / np.maximum(y, 1e-300))
+    return props.GJ0 * ratio
+
+
+def collapsed(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
+    """True where the curvature exceeds Breukels' collapse curvature (tube wrinkles through)."""
+    return np.abs(np.asarray(kappa, dtype=float)) > props.kappa_collapse
