@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# README main job (until the flight model lands): aeroelastic polar of the rhino16 kite at 25 m/s.
+# Extra arguments are passed to kite-polar (e.g. --kite v3 --out runs/polar_v3).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/_venv.sh
+if [ "$#" -eq 0 ]; then
+  set -- --kite rhino16 --airspeed 25 --alpha-deg -5:20:1 --out runs/polar_rhino16
+fi
+exec .venv/bin/kite-polar "$@"

@@ -1,0 +1,185 @@
+"""Breukels' LEI airfoil regression with its post-stall continuation (kite_env.aero.breukels)."""
+
+import numpy as np
+import pytest
+
+from kite_env.aero.breukels import (
+    ALPHA_FP_MIN_DEG,
+    ALPHA_POLY_MAX_DEG,
+    flat_plate_coefficients,
+    lei_coefficients,
+    poly_coefficients,
+)
+
+# Check table transcribed from /work/shared/reference/physics_facts.md section 1.6 ("Evaluated values (computed from
+# the table above)"; the constants C20..C62 come from awegroup/Vortex-Step-Method, OpenSourceAWE/VortexStepMethod.jl
+# and a LEI_airf_coeff thesis helper [S1-S3] there). t = 0.100, kappa = 0.095; columns alpha [deg], CL, CD, CM.
+TABLE_T, TABLE_KAPPA = 0.100, 0.095
+TABLE_LAMBDA = (-0.000322002, -0.000679965, 0.193694, 0.141663)  # lambda5..lambda8
+TABLE_POLY = np.array([
+    [-20, -1.4282, 0.1843, -2.7461],
+    [-10, -1.5413, 0.0781, -0.6336],
+    [-5, -0.8036, 0.0516, -0.1055],
+    [0, 0.1417, 0.0427, 0.0705],
+    [5, 1.0529, 0.0516, -0.1055],
+    [10, 1.6886, 0.0781, -0.6336],
+    [15, 1.8073, 0.1224, -1.5138],
+    [20, 1.1675, 0.1843, -2.7461],
+])
+# flat-plate rows of the same table (CL = 2 cos a sin^2 a, CD = 2 sin^3 a); their CM column is the regression
+# polynomial, which breukels.py deliberately replaces beyond 20 deg (checked separately below).
+TABLE_FLAT = np.array([
+    [25, 0.3237, 0.1510],
+    [30, 0.4330, 0.2500],
+    [45, 0.7071, 0.7071],
+    [90, 0.0000, 2.0000],
+])
+# second and third parameter sets of physics_facts 1.6: (t, kappa, lambda5..8, CL at 0,5,10,15,20 deg, CD at 0,10,20)
+TABLE_OTHER = [
+    (0.080, 0.080, (-0.000305742, -0.000616058, 0.188669, 0.135703),
+     (0.1357, 1.0254, 1.6550, 1.7952, 1.2167), (0.0405, 0.0752, 0.1793)),
+    (0.120, 0.060, (-0.000370702, -0.000578355, 0.196022, 0.107305),
+     (0.1073, 1.0266, 1.6390, 1.6664, 0.8308), (0.0375, 0.0799, 0.2070)),
+]
+TOL_TABLE = 1.0e-4  # the table is rounded to 4 decimals (max rounding error 5e-5)
+
+
+def coeffs_deg(alpha_deg, t=TABLE_T, kappa=TABLE_KAPPA, x_ref=0.25):
+    return lei_coefficients(np.deg2rad(alpha_deg), t, kappa, x_ref)
+
+
+def test_check_table_regression_range():
+    cl, cd, cm = coeffs_deg(TABLE_POLY[:, 0])
+    np.testing.assert_allclose(cl, TABLE_POLY[:, 1], atol=TOL_TABLE, rtol=0)
+    np.testing.assert_allclose(cd, TABLE_POLY[:, 2], atol=TOL_TABLE, rtol=0)
+    np.testing.assert_allclose(cm, TABLE_POLY[:, 3], atol=TOL_TABLE, rtol=0)
+
+
+def test_lambda_coefficients():
+    lam = poly_coefficients(np.array([TABLE_T]), np.array([TABLE_KAPPA]))[:4, 0]
+    # the table gives lambda5, lambda6 to 6 significant digits and lambda7, lambda8 to 6 decimals
+    tol = np.array([5.01e-10, 5.01e-10, 5.01e-7, 5.01e-7])
+    assert np.all(np.abs(lam - TABLE_LAMBDA) <= tol)
+    for t, k, lam_ref, _, _ in TABLE_OTHER:
+        assert np.all(np.abs(poly_coefficients(np.array([t]), np.array([k]))[:4, 0] - lam_ref) <= tol)
+
+
+@pytest.mark.parametrize("t, kappa, lam, cl_ref, cd_ref", TABLE_OTHER)
+def test_check_table_other_parameters(t, kappa, lam, cl_ref, cd_ref):
+    cl, _, _ = coeffs_deg(np.array([0.0, 5.0, 10.0, 15.0, 20.0]), t, kappa)
+    _, cd, _ = coeffs_deg(np.array([0.0, 10.0, 20.0]), t, kappa)
+    np.testing.assert_allclose(cl, cl_ref, atol=TOL_TABLE, rtol=0)
+    np.testing.assert_allclose(cd, cd_ref, atol=TOL_TABLE, rtol=0)
+
+
+def test_check_table_flat_plate():
+    # beyond 30 deg the coefficients are the flat-plate law of the table
+    a = TABLE_FLAT[1:, 0]
+    cl, cd, _ = coeffs_deg(a)
+    np.testing.assert_allclose(cl, TABLE_FLAT[1:, 1], atol=TOL_TABLE, rtol=0)
+    np.testing.assert_allclose(cd, TABLE_FLAT[1:, 2], atol=TOL_TABLE, rtol=0)
+    # the 25 deg row is the open codes' hard switch; the flat-plate law itself reproduces it
+    cl25, cd25, _ = flat_plate_coefficients(np.deg2rad(25.0))
+    np.testing.assert_allclose([cl25, cd25], TABLE_FLAT[0, 1:], atol=TOL_TABLE, rtol=0)
+
+
+def test_post_stall_moment_is_flat_plate_about_reference():
+    # beyond 30 deg: normal force C_N = 2 sin a |sin a| acting at mid-chord, moment about x_ref (nose-up positive)
+    a_deg = np.array([-150.0, -90.0, -45.0, -30.0, 30.0, 45.0, 90.0, 150.0])
+    for x_ref in (0.0, 0.25, 0.5):
+        _, _, cm = coeffs_deg(a_deg, x_ref=x_ref)
+        s = np.sin(np.deg2rad(a_deg))
+        np.testing.assert_allclose(cm, -2.0 * s * np.abs(s) * (0.5 - x_ref), atol=1e-14)
+
+
+def test_blend_band_between_regression_tangent_and_flat_plate():
+    # inside 20..30 deg the value lies between the tangent-line continuation and the flat-plate law
+    a_deg = np.linspace(20.5, 29.5, 10)
+    cl, cd, _ = coeffs_deg(a_deg)
+    lam5, lam6, lam7, lam8 = TABLE_LAMBDA
+    cl20 = ((lam5 * 20 + lam6) * 20 + lam7) * 20 + lam8
+    dcl20 = (3 * lam5 * 20 + 2 * lam6) * 20 + lam7
+    tangent = cl20 + dcl20 * (a_deg - 20.0)
+    fp, _, _ = flat_plate_coefficients(np.deg2rad(a_deg))
+    assert np.all((cl - np.minimum(tangent, fp)) >= -1e-12)
+    assert np.all((np.maximum(tangent, fp) - cl) >= -1e-12)
+    assert np.all(cl > 0) and np.all(cd > 0)
+
+
+@pytest.mark.parametrize("edge_deg", [-ALPHA_FP_MIN_DEG, -ALPHA_POLY_MAX_DEG, ALPHA_POLY_MAX_DEG, ALPHA_FP_MIN_DEG])
+@pytest.mark.parametrize("t, kappa", [(0.1, 0.095), (0.08, 0.04), (0.18, 0.12)])
+def test_continuity_and_c1_at_switch_points(edge_deg, t, kappa):
+    a0 = np.deg2rad(edge_deg)
+    h = 1e-7
+    pts = np.array([a0 - h, a0, a0 + h])
+    for k, c in enumerate(lei_coefficients(pts, t, kappa)):
+        left = (c[1] - c[0]) / h
+        right = (c[2] - c[1]) / h
+        scale = max(1.0, abs(left))
+        # a kink (C0 only) would show a jump of O(1) per rad; the one-sided difference error is O(f'' h) < 2e-4
+        # (|f''| reaches ~1e3 per rad^2 in the CM blend at 30 deg for thick, cambered sections)
+        assert abs(right - left) < 1e-3 * scale, (k, left, right)
+        assert abs(c[2] - c[0]) < 1e-4 * scale
+
+
+def test_no_jump_over_the_whole_range():
+    a = np.deg2rad(np.linspace(-179.0, 179.0, 35801))
+    for c in lei_coefficients(a, 0.1, 0.095):
+        # the largest slope (|dCM/da| of the 20 deg tangent line) is below 40 per rad
+        assert np.max(np.abs(np.diff(c))) < 40.0 * (a[1] - a[0])
+
+
+def test_sign_correct_lift_for_large_negative_alpha():
+    a_deg = np.linspace(-89.0, -5.0, 85)  # CL = 0 at exactly -90 deg (flat plate broadside)
+    cl, cd, _ = coeffs_deg(a_deg)
+    assert np.all(cl < 0.0)
+    assert np.all(cd > 0.0)
+    # beyond the blend band the law is exactly odd in CL
+    big = np.linspace(30.0, 90.0, 13)
+    np.testing.assert_allclose(coeffs_deg(-big)[0], -coeffs_deg(big)[0], atol=1e-15)
+
+
+def test_lift_odd_part_and_symmetry_properties():
+    a_deg = np.linspace(0.0, 20.0, 21)
+    cl_p, cd_p, cm_p = coeffs_deg(a_deg)
+    cl_m, cd_m, cm_m = coeffs_deg(-a_deg)
+    lam5, lam6, lam7, lam8 = TABLE_LAMBDA
+    # inside +-20 deg: odd part = lambda5 a^3 + lambda7 a, even part = lambda6 a^2 + lambda8 (a in deg)
+    np.testing.assert_allclose(0.5 * (cl_p - cl_m), lam5 * a_deg**3 + lam7 * a_deg, atol=5e-5)
+    np.testing.assert_allclose(0.5 * (cl_p + cl_m), lam6 * a_deg**2 + lam8, atol=5e-5)
+    np.testing.assert_allclose(cm_p, cm_m, atol=1e-15)
+    assert np.all(coeffs_deg(np.linspace(5.0, 89.0, 85))[0] > 0)
+
+
+def test_drag_even_and_positive_everywhere():
+    a_deg = np.linspace(-175.0, 175.0, 701)
+    for t, kappa in [(0.07, 0.0), (0.1, 0.095), (0.2, 0.12), (0.07, 0.12), (0.2, 0.0)]:
+        _, cd, _ = coeffs_deg(a_deg, t, kappa)
+        _, cd_m, _ = coeffs_deg(-a_deg, t, kappa)
+        assert np.all(cd > 0.0)
+        np.testing.assert_allclose(cd, cd_m, atol=1e-15)
+
+
+def test_vectorised_shapes_and_broadcasting():
+    alpha = np.deg2rad(np.linspace(-40, 40, 20)).reshape(4, 5)
+    t = np.linspace(0.08, 0.12, 5)
+    kappa = 0.09
+    cl, cd, cm = lei_coefficients(alpha, t, kappa)
+    assert cl.shape == cd.shape == cm.shape == (4, 5)
+    # element-wise equality with scalar calls
+    for i, j in [(0, 0), (1, 3), (3, 4), (2, 2)]:
+        ref = lei_coefficients(alpha[i, j], t[j], kappa)
+        np.testing.assert_allclose([cl[i, j], cd[i, j], cm[i, j]], [float(r) for r in ref], rtol=1e-14, atol=1e-15)
+    assert np.shape(lei_coefficients(0.1, 0.1, 0.1)[0]) == ()
+
+
+def test_moment_transfer_to_other_reference_points():
+    # CM about x_ref = CM about c/4 + (x_ref - 1/4) C_N with C_N = CL cos a + CD sin a, over the whole range
+    a = np.deg2rad(np.linspace(-170.0, 170.0, 341))
+    cl, cd, cm_qc = lei_coefficients(a, 0.1, 0.095)
+    cn = cl * np.cos(a) + cd * np.sin(a)
+    for x_ref in (0.0, 0.5, np.full(a.shape, 0.7)):
+        cl_x, cd_x, cm_x = lei_coefficients(a, 0.1, 0.095, x_ref)
+        np.testing.assert_allclose(cl_x, cl, rtol=1e-15)
+        np.testing.assert_allclose(cd_x, cd, rtol=1e-15)
+        np.testing.assert_allclose(cm_x, cm_qc + (x_ref - 0.25) * cn, atol=1e-13)
