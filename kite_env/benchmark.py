@@ -1,0 +1,72 @@
+"""Speed benchmark of the static aeroelastic wing (cold solve, warm time steps, resolution study).
+
+A *warm step* is what the flight-dynamics integrator asks of the wing at every time step: new bridle-point
+positions ``q_b`` and a new flight state, solved from the previous step's shape. The benchmark drives the wing
+through a steering manoeuvre sampled at the paper's mean RK45 step (5.3 ms): the rear bridle points B and D move
+up and down in opposite phase (0.1 m amplitude, 2 s period), the kite angle of attack varies by +-1 deg and the
+kite yaws at up to 0.5 rad/s, starting from the converged nominal state (25 m/s, alpha_k = 8 deg).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from kite_env.config import Config
+from kite_env.fsi import AeroelasticWing, FlightState
+
+PAPER_STEP_S = 5.3e-3  # mean RK45 step of the paper (Sect. IV) [s]
+PAPER_WALL_PER_STEP_MS = 27.5 / (1.0 / PAPER_STEP_S) * 1e3  # 27.5 s wall per s of flight -> ms per step
+
+
+def bench_resolution(kite: str, n_sections: int, n_chord: int, n_steps: int = 100, cfg: Config | None = None,
+                     airspeed: float = 25.0, alpha_deg: float = 8.0) -> dict:
+    """Time one cold solve and ``n_steps`` warm steps of one mesh resolution."""
+    from kite_env.geometry import build_kite
+
+    cfg = cfg or Config()
+    mesh = build_kite(kite, n_sections=n_sections, n_chord=n_chord)
+    wing = AeroelasticWing(mesh, cfg)
+    flight0 = FlightState.wind_tunnel(airspeed, np.deg2rad(alpha_deg))
+    t0 = time.perf_counter()
+    sol = wing.solve(None, flight0, support="lines", warm=False)
+    cold = time.perf_counter() - t0
+    q0 = sol.nodes[wing.bridle].copy()
+    times, newton, coupling = [], [], []
+    for k in range(1, n_steps + 1):
+        t = k * PAPER_STEP_S
+        s = np.sin(2 * np.pi * t / 2.0)
+        q = q0.copy()
+        q[1, 2] -= 0.1 * s  # B (right rear) pulled towards the bridle
+        q[3, 2] += 0.1 * s  # D released
+        fl = FlightState.wind_tunnel(airspeed, np.deg2rad(alpha_deg + 1.0 * s))
+        fl = FlightState(fl.v_kite, np.array([0.0, 0.0, 0.5 * s]), fl.v_wind)
+        t1 = time.perf_counter()
+        r = wing.solve(q, fl, dt=PAPER_STEP_S, support="prescribed", warm=True)
+        times.append(time.perf_counter() - t1)
+        newton.append(r.newton_iters)
+        coupling.append(r.coupling_iters)
+    times = np.array(times) * 1e3
+    return {
+        "kite": kite, "n_sections": n_sections, "n_chord": n_chord,
+        "nodes": int(mesh.n_nodes), "shells": int(len(mesh.shells)), "beams": int(len(mesh.beams)),
+        "dof": int(6 * mesh.n_nodes), "cold_solve_s": cold,
+        "warm_step_ms_median": float(np.median(times)), "warm_step_ms_p90": float(np.percentile(times, 90)),
+        "newton_iters_mean": float(np.mean(newton)), "coupling_iters_mean": float(np.mean(coupling)),
+        "n_steps": n_steps, "lift_to_drag_nominal": float(sol.lift_to_drag),
+    }
+
+
+def format_table(rows: list[dict]) -> str:
+    cols = [("n_sections", "sections", "d"), ("n_chord", "chord pts", "d"), ("nodes", "nodes", "d"),
+            ("shells", "shells", "d"), ("beams", "beams", "d"), ("dof", "DOF", "d"),
+            ("cold_solve_s", "cold solve [s]", ".2f"), ("warm_step_ms_median", "warm step median [ms]", ".1f"),
+            ("warm_step_ms_p90", "warm step p90 [ms]", ".1f"), ("newton_iters_mean", "Newton it/step", ".2f"),
+            ("coupling_iters_mean", "coupling it/step", ".2f")]
+    head = "| " + " | ".join(c[1] for c in cols) + " |"
+    sep = "|" + "|".join("---:" for _ in cols) + "|"
+    lines = [head, sep]
+    for r in rows:
+        lines.append("| " + " | ".join(format(r[c[0]], c[2]) for c in cols) + " |")
+    return "\n".join(lines)

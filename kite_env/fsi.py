@@ -1,0 +1,355 @@
+"""Static aeroelastic coupling of the wing (Bosch et al., Sect. II, Fig. 2; Eq. 1-9).
+
+For prescribed bridle-point positions ``q_b`` and a flight state ``X`` (kite velocity, angular velocity, wind), the
+structure and the steady aerodynamic load model are alternated until the shape and the loads stop changing:
+
+1. aero loads ``F_a(q, X)`` on the current shape (Eq. 2-9, :mod:`kite_env.aero`),
+2. Newton-Raphson on the first block of Eq. (1) with ``F_a`` held fixed (:mod:`kite_env.structure.solver`),
+3. the inflated-tube stiffness ``EI(p, d, q)`` updated from the new shape (secant, :mod:`kite_env.structure.tube`),
+
+until the largest nodal position change between coupling iterations is below ``fsi.tol_disp_m`` and the aero load
+vector changes by less than ``fsi.tol_force_rel`` of its norm. The reactions ``F_b`` at A-D follow from the second
+block of Eq. (1). Everything is expressed in the kite frame K (:mod:`kite_env.frames`).
+
+Two ways to hold the bridle points:
+
+* ``support="prescribed"``: A-D fixed at ``q_b`` (the dynamic model's boundary condition, Sect. II.C).
+* ``support="lines"``: for static analyses (polar, steady cases) the x_k and z_k coordinates of A-D are prescribed
+  while their y_k coordinates are free and pulled towards a fixed kite control unit by the bridle-line tension
+  (the line force along the line, its tension taken from the reaction of the previous coupling iteration). This is
+  how the wing tips are drawn together under load in flight (paper, Sect. IV.C) without solving the flight dynamics.
+
+Failure to converge raises :class:`WingConvergenceError` with the coupling history; nothing returns NaN silently.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kite_env.aero.loads import section_loads, wing_totals
+from kite_env.config import Config
+from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteMesh
+from kite_env.structure import tube
+from kite_env.structure.assembly import Assembler
+from kite_env.structure.beam import BeamSet
+from kite_env.structure.shell import ShellSet
+from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
+
+#: Poisson ratio used to derive the shear modulus of the solid tip rod and TE wire (G = E / (2 (1 + nu))).
+_NU_ROD = 0.3
+
+
+class WingConvergenceError(RuntimeError):
+    """The static aeroelastic problem did not converge; ``history`` holds one dict per coupling iteration."""
+
+    def __init__(self, message: str, history: list[dict]):
+        lines = [message, "coupling history (iter, max|dx| [m], rel. load change, newton iters):"]
+        for h in history[-12:]:
+            lines.append(f"  {h['iter']:3d}  {h['dx_max_m']:.3e}  {h['dload_rel']:.3e}  {h['newton_iters']}")
+        super().__init__("\n".join(lines))
+        self.history = history
+
+
+@dataclass(frozen=True)
+class FlightState:
+    """Wing state vector X of the paper, in frame K: ``v_kite`` [m/s], ``omega`` [rad/s], ``v_wind`` [m/s]."""
+
+    v_kite: np.ndarray
+    omega: np.ndarray
+    v_wind: np.ndarray
+
+    @classmethod
+    def wind_tunnel(cls, airspeed_mps: float, alpha_rad: float, sideslip_rad: float = 0.0) -> "FlightState":
+        """Kite at rest in a uniform flow of ``airspeed_mps`` at kite angle of attack ``alpha_rad``.
+
+        The kite angle of attack is the angle between the inflow (air relative to the kite) and ``x_k`` in the
+        ``x_k``-``z_k`` plane, positive for inflow from the ``-z_k`` side; sideslip rotates the inflow towards ``+y_k``.
+        """
+        ca, sa = np.cos(alpha_rad), np.sin(alpha_rad)
+        cb, sb = np.cos(sideslip_rad), np.sin(sideslip_rad)
+        flow = airspeed_mps * np.array([ca * cb, sb, sa * cb])
+        return cls(v_kite=np.zeros(3), omega=np.zeros(3), v_wind=flow)
+
+
+@dataclass
+class WingSolution:
+    """Result of one static aeroelastic solve (all vectors in frame K, SI units)."""
+
+    F_b: np.ndarray  # (4, 3) reaction forces at A, B, C, D on the wing [N]; the wing pulls its bridle with -F_b
+    nodes: np.ndarray  # (n_nodes, 3) deformed node positions [m]
+    alpha: np.ndarray  # (n_sec,) section angles of attack [rad]
+    CL: np.ndarray
+    CD: np.ndarray
+    CM: np.ndarray
+    aero_force: np.ndarray  # (3,) total aerodynamic force [N]
+    lift: float  # [N], perpendicular to the apparent wind at the kite origin
+    drag: float  # [N], along the apparent wind
+    coupling_iters: int
+    newton_iters: int
+    history: list[dict] = field(default_factory=list)
+    tube_collapsed: np.ndarray | None = None  # (n_beams,) bool
+    section_forces: np.ndarray | None = None  # (n_sec, m, 3) [N]
+
+    @property
+    def lift_to_drag(self) -> float:
+        return self.lift / self.drag if self.drag > 0 else float("inf")
+
+
+def _rod_section(E: float, d: np.ndarray):
+    A = np.pi * d**2 / 4.0
+    I = np.pi * d**4 / 64.0
+    G = E / (2.0 * (1.0 + _NU_ROD))
+    return E * A, E * I, E * I, G * 2.0 * I
+
+
+class AeroelasticWing:
+    """The quasi-static aeroelastic wing: FE structure (shells + beams) coupled with section aerodynamics.
+
+    Parameters
+    ----------
+    mesh : KiteMesh
+        Unloaded design mesh in frame K.
+    cfg : Config
+        Uses ``cfg.structure``, ``cfg.aero`` and ``cfg.fsi``.
+    """
+
+    def __init__(self, mesh: KiteMesh, cfg: Config | None = None):
+        self.mesh = mesh
+        self.cfg = cfg or Config()
+        s = self.cfg.structure
+        kind = mesh.beam_kind
+        d = mesh.beam_diameter
+        n_b = len(kind)
+        self._is_tube = (kind == BEAM_LE) | (kind == BEAM_STRUT)
+        EA, EI2, EI3, GJ = (np.zeros(n_b) for _ in range(4))
+        self.tube_props = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube])
+        EA[self._is_tube] = np.pi * d[self._is_tube] * s.tube_wall_Et_N_per_m
+        EI2[self._is_tube] = EI3[self._is_tube] = self.tube_props.EI0
+        GJ[self._is_tube] = self.tube_props.GJ0
+        for code, E in ((BEAM_TIP, s.tip_rod_E_Pa), (BEAM_TE, s.te_wire_E_Pa)):
+            sel = kind == code
+            EA[sel], EI2[sel], EI3[sel], GJ[sel] = _rod_section(E, d[sel])
+        self.beams = BeamSet(mesh.beams, mesh.nodes, mesh.beam_up, EA, EI2, EI3, GJ)
+        self.shells = ShellSet(mesh.shells, mesh.nodes, s.canopy_E_Pa, s.canopy_nu, s.canopy_thickness_m,
+                               wrinkling=s.wrinkling)
+        self.assembler = Assembler(mesh.n_nodes, [self.beams, self.shells])
+        self.solver = StaticSolver(self.assembler)
+        self.lines = BridleLines(mesh.bridle)
+        self._lines_solver = StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines]))
+        self.bridle = np.asarray(mesh.bridle)
+        self.n_dof = 6 * mesh.n_nodes
+        self.state = self.unloaded_state()
+        self._sec_prev: np.ndarray | None = None  # section node positions at the previous time step (Eq. 3)
+        # kite control unit for support="lines": below the tip mid-chord, power-line length from the paper (Table 1)
+        self.line_length_m = 25.0
+
+    # ------------------------------------------------------------------ state handling
+    def unloaded_state(self) -> NodalState:
+        n = self.mesh.n_nodes
+        return NodalState(self.mesh.nodes.copy(), np.broadcast_to(np.eye(3), (n, 3, 3)).copy())
+
+    def reset(self) -> None:
+        """Forget the warm-start state (next solve starts from the unloaded wing)."""
+        self.state = self.unloaded_state()
+        self._sec_prev = None
+
+    @property
+    def design_bridle(self) -> np.ndarray:
+        """(4, 3) unloaded positions of A, B, C, D in frame K [m]."""
+        return self.mesh.nodes[self.bridle].copy()
+
+    def kcu_position(self) -> np.ndarray:
+        """Design KCU position in K used by ``support="lines"``: on the symmetry plane below the tip mid-chord,
+        at the power-line length (Table 1: L_A = L_C = 25 m) from A and C."""
+        a, b = self.mesh.nodes[self.bridle[0]], self.mesh.nodes[self.bridle[1]]
+        x = 0.5 * (a[0] + b[0])
+        h = np.sqrt(max(self.line_length_m**2 - a[1] ** 2 - (x - a[0]) ** 2, 1.0))
+        return np.array([x, 0.0, a[2] - h])
+
+    # ------------------------------------------------------------------ pieces of the coupling loop
+    def _update_tube_stiffness(self, state: NodalState) -> np.ndarray:
+        """Secant EI(p, d, kappa) and GJ(p, d, phi) of the tubes from the current element deformation.
+
+        Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
+        tb = self._is_tube
+        loc = self.beams.local_deformation(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
+        th1, th2, L = loc["theta1"][tb], loc["theta2"][tb], loc["length"][tb][:, None]
+        # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs the secant
+        kappa = np.maximum(np.linalg.norm(-(4 * th1[:, 1:] + 2 * th2[:, 1:]) / L, axis=1),
+                           np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L, axis=1))
+        phi = np.abs(th2[:, 0] - th1[:, 0]) / L[:, 0]
+        EI = self.beams.EI2.copy()
+        GJ = self.beams.GJ.copy()
+        EI[tb] = tube.secant_EI(self.tube_props, kappa)
+        GJ[tb] = tube.secant_GJ(self.tube_props, phi)
+        self.beams.set_stiffness(EI2=EI, EI3=EI.copy(), GJ=GJ)
+        collapsed = np.zeros(len(self.mesh.beams), bool)
+        collapsed[tb] = tube.collapsed(self.tube_props, kappa)
+        return collapsed
+
+    def _aero(self, state: NodalState, flight: FlightState, dt: float | None):
+        sec = self.mesh.sections
+        return section_loads(
+            state.x[sec], self.mesh.section_tube_d, self.mesh.section_width,
+            flight.v_kite, flight.omega, flight.v_wind, self.cfg.aero.rho_kg_m3,
+            x_sec_prev=self._sec_prev if dt else None, dt=dt,
+        )
+
+    def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
+        f = np.zeros((self.mesh.n_nodes, 6))
+        np.add.at(f[:, :3], self.mesh.sections.ravel(), scale * loads.nodal_forces.reshape(-1, 3))
+        return f.ravel()
+
+    # ------------------------------------------------------------------ main entry
+    def solve(self, q_b: np.ndarray | None, flight: FlightState, dt: float | None = None, support: str = "prescribed",
+              warm: bool = True, commit: bool = True) -> WingSolution:
+        """Static aeroelastic equilibrium for bridle points ``q_b`` (4, 3) [m] in K (None: design positions).
+
+        ``dt`` [s] enables the deformation velocity of Eq. (3) relative to the previous committed solution.
+        ``warm=False`` starts from the unloaded wing with a dynamic-pressure ramp (``fsi.cold_load_steps``).
+        ``commit`` stores the solution as the warm start (and Eq. 3 reference) of the next call.
+        """
+        if support not in ("prescribed", "lines"):
+            raise ValueError(f"support must be 'prescribed' or 'lines', got {support!r}")
+        q_b = self.design_bridle if q_b is None else np.asarray(q_b, dtype=float).reshape(4, 3)
+        if not np.all(np.isfinite(q_b)):
+            raise ValueError("bridle positions q_b contain non-finite values")
+        t0 = time.perf_counter()
+        if warm and self.state is not None:
+            state = self.state.copy()
+            ramp = [1.0]
+        else:
+            state = self.unloaded_state()
+            n = self.cfg.fsi.cold_load_steps
+            ramp = list(np.arange(1, n + 1) / n)
+        history: list[dict] = []
+        sol = None
+        for scale in ramp:
+            state, sol = self._couple(state, q_b, flight, dt, support, scale, history)
+        sol.history = history
+        if commit:
+            self.state = state
+            self._sec_prev = state.x[self.mesh.sections].copy()
+        sol.history.append({"wall_s": time.perf_counter() - t0})
+        return sol
+
+    def _couple(self, state, q_b, flight, dt, support, scale, history):
+        fcfg = self.cfg.fsi
+        b = self.bridle
+        if support == "prescribed":
+            fixed = (6 * b[:, None] + np.arange(3)[None, :]).ravel()
+            du_fixed = (q_b - state.x[b]).ravel()
+            solver = self.solver
+        else:
+            fixed = (6 * b[:, None] + np.array([0, 2])[None, :]).ravel()
+            du_fixed = (q_b - state.x[b])[:, [0, 2]].ravel()
+            solver = self._lines_solver
+            self.lines.anchor[:] = self.kcu_position()
+        f_prev = None
+        newton_total = 0
+        collapsed = None
+        f_used = None  # relaxed load vector applied to the structure
+        r_prev = None
+        omega = fcfg.relax_initial
+        for it in range(1, fcfg.max_coupling_iter + 1):
+            loads = self._aero(state, flight, dt)
+            f_aero = self._load_vector(loads, scale)
+            # Aitken's dynamic under-relaxation of the aerodynamic load vector (Irons & Tuck 1969; Kuettler & Wall
+            # 2008): the plain alternation of Fig. 2 diverges for this very flexible wing, whose section angles of
+            # attack, and so its loads, follow the shape strongly. The fixed point (the equilibrium) is unchanged.
+            if f_used is None:
+                f_ext = f_aero
+            else:
+                r_k = f_aero - f_used
+                if r_prev is not None:
+                    dr = r_k - r_prev
+                    den = float(dr @ dr)
+                    if den > 0.0:
+                        omega = float(np.clip(-omega * float(r_prev @ dr) / den, fcfg.relax_min, 1.0))
+                f_ext = f_used + omega * r_k
+                r_prev = r_k
+            f_used = f_ext
+            if support == "lines" and it == 1:
+                # first guess of the line tensions: the aerodynamic force shared by the four lines
+                self.lines.tension[:] = max(np.linalg.norm(f_ext.reshape(-1, 6)[:, :3].sum(axis=0)) / 4.0, 1.0)
+            fnorm = np.linalg.norm(f_aero)
+            dload = np.inf if f_prev is None else np.linalg.norm(f_aero - f_prev) / max(fnorm, 1e-12)
+            collapsed = self._update_tube_stiffness(state)
+            try:
+                res = solver.solve(state, f_ext, fixed, du_fixed)
+            except ConvergenceError as exc:
+                history.append({"iter": it, "dx_max_m": np.nan, "dload_rel": dload, "newton_iters": -1})
+                raise WingConvergenceError(f"structural Newton solve failed in coupling iteration {it}: {exc}",
+                                           history) from exc
+            dx = float(np.max(np.abs(res.state.x - state.x)))
+            state = res.state
+            du_fixed = np.zeros_like(du_fixed)
+            newton_total += res.iterations
+            entry = {"iter": it, "dx_max_m": dx, "dload_rel": dload, "newton_iters": res.iterations, "scale": scale,
+                     "relax": omega}
+            if support == "lines":
+                # line tension T = pull of the wing along its line (Eq. 1, second block, projected on the line)
+                F_b = self._wing_reactions(state, f_ext)
+                e_in = self.lines.anchor - state.x[b]
+                e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
+                T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
+                entry["dT_rel"] = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
+                self.lines.tension[:] = T_new
+            history.append(entry)
+            if not np.isfinite(dx):
+                raise WingConvergenceError("non-finite displacement in the coupling loop", history)
+            if dx < fcfg.tol_disp_m and dload < fcfg.tol_force_rel and entry.get("dT_rel", 0.0) < fcfg.tol_force_rel:
+                break
+            f_prev = f_aero
+        else:
+            raise WingConvergenceError(
+                f"static aeroelastic coupling did not converge in {fcfg.max_coupling_iter} iterations "
+                f"(tol_disp_m={fcfg.tol_disp_m}, tol_force_rel={fcfg.tol_force_rel})", history)
+        # final aero loads on the converged shape and reactions F_b (second block of Eq. 1)
+        loads = self._aero(state, flight, dt)
+        f_ext = self._load_vector(loads, scale)
+        F_b = self._wing_reactions(state, f_ext)
+        v_ref = flight.v_kite - flight.v_wind
+        tot = wing_totals(loads, v_ref)
+        sol = WingSolution(
+            F_b=F_b, nodes=state.x.copy(), alpha=loads.alpha, CL=loads.CL, CD=loads.CD, CM=loads.CM,
+            aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
+            coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=newton_total,
+            tube_collapsed=collapsed, section_forces=scale * loads.nodal_forces,
+        )
+        return state, sol
+
+    def _wing_reactions(self, state: NodalState, f_ext: np.ndarray) -> np.ndarray:
+        """F_b = F_i^b - F_a^b (Eq. 1, second block): force of the bridle on the wing at A-D, (4, 3) [N]."""
+        f_int, _ = self.assembler.assemble(state.x, state.Rn, tangent=False)
+        return (f_int - f_ext).reshape(-1, 6)[self.bridle, :3].copy()
+
+
+class BridleLines:
+    """Bridle lines of constant tension pulling nodes towards a fixed anchor (the KCU), as an element set.
+
+    Strain energy ``U = T |x - anchor|`` (tension held fixed within a Newton solve): internal force ``T e`` with
+    ``e = (x - anchor)/|x - anchor|`` and tangent ``T/l (I - e e^T)``. Used by ``support="lines"`` only, where it
+    supplies the lateral stiffness of the otherwise free ``y_k`` coordinates of A-D.
+    """
+
+    n_en = 1
+
+    def __init__(self, nodes: np.ndarray):
+        self.conn = np.asarray(nodes, dtype=np.int64).reshape(-1, 1)
+        self.anchor = np.zeros((len(self.conn), 3))
+        self.tension = np.ones(len(self.conn))
+
+    def internal(self, x_e, R_e):
+        d = x_e[:, 0] - self.anchor
+        l = np.linalg.norm(d, axis=1)
+        e = d / l[:, None]
+        n = len(l)
+        f = np.zeros((n, 6))
+        f[:, :3] = self.tension[:, None] * e
+        K = np.zeros((n, 6, 6))
+        K[:, :3, :3] = (self.tension / l)[:, None, None] * (np.eye(3) - e[:, :, None] * e[:, None, :])
+        return f, K

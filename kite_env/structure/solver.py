@@ -1,0 +1,245 @@
+"""Newton-Raphson static solver with prescribed DOF (first and second block of the paper's Eq. 1).
+
+The state is the nodal positions ``x`` and nodal rotation matrices ``Rn``; an increment ``du`` (6 per node) adds
+translations and applies rotations as spatial spins, ``Rn <- expm(dw) Rn`` (multiplicative update, see
+:mod:`kite_env.structure.rotations`). Prescribed DOF are moved to their target in the first iteration and then held;
+the free DOF solve ``K_ff du_f = f_ext,f - f_int,f`` (Eq. 1, first block, loads held fixed). The reactions are
+``F_b = f_int,b - f_ext,b`` (Eq. 1, second block).
+
+The sparse reduced matrix ``K_ff`` is extracted from the assembler's fixed pattern with an index map built once per
+set of prescribed DOF. ``mode="modified"`` keeps the LU factorisation of a previous iteration (or previous call)
+as long as the residual contracts fast enough, which is what makes warm time steps cheap; ``mode="full"`` refactors
+every iteration (quadratic convergence). Failure raises :class:`ConvergenceError` with the residual history.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .assembly import DOF_PER_NODE, Assembler
+from .rotations import expm
+
+#: Multiple of (machine eps x largest diagonal stiffness x model size) below which the residual is round-off.
+_ROUNDOFF = 16.0
+#: ... and relative size (energy norm squared) of the last Newton correction for such a residual to count as converged.
+_WORK_TOL = 1e-14
+
+
+class ConvergenceError(RuntimeError):
+    """Newton iterations failed; ``history`` holds ``(iteration, residual norm, increment norm)`` tuples."""
+
+    def __init__(self, message: str, history: list):
+        tail = "\n".join(f"  it {h[0]:3d}  |r| = {h[1]:.3e}  |du| = {h[2]:.3e}" for h in history[-10:])
+        super().__init__(f"{message}\nresidual history (last {min(len(history), 10)}):\n{tail}")
+        self.history = list(history)
+
+
+@dataclass
+class NodalState:
+    """Nodal positions ``x`` (n_nodes, 3) [m] and rotation matrices ``Rn`` (n_nodes, 3, 3)."""
+
+    x: np.ndarray
+    Rn: np.ndarray
+
+    def copy(self) -> "NodalState":
+        return NodalState(self.x.copy(), self.Rn.copy())
+
+    @classmethod
+    def reference(cls, X0: np.ndarray) -> "NodalState":
+        X0 = np.asarray(X0, dtype=float)
+        return cls(X0.copy(), np.broadcast_to(np.eye(3), (X0.shape[0], 3, 3)).copy())
+
+    def updated(self, du: np.ndarray) -> "NodalState":
+        """New state after the increment ``du`` (6 n_nodes,): translations added, spins applied as rotations."""
+        d = du.reshape(-1, DOF_PER_NODE)
+        return NodalState(self.x + d[:, :3], np.einsum("nij,njk->nik", expm(d[:, 3:]), self.Rn))
+
+
+@dataclass
+class StaticResult:
+    state: NodalState
+    reactions: np.ndarray  # (n_dof,) f_int - f_ext; nonzero at prescribed DOF [N, N m]
+    iterations: int
+    history: list = field(default_factory=list)
+    converged: bool = True
+    factorizations: int = 0
+
+
+class StaticSolver:
+    """Newton-Raphson on ``f_int(x, Rn) = f_ext`` with prescribed DOF.
+
+    Parameters
+    ----------
+    assembler : Assembler
+    tol_force : float
+        Converged when ``|r_f| <= tol_force * max(|f_ext|, |reactions|, force_floor)``, or when ``|r_f|`` sits at
+        the round-off floor ``16 eps max|K_ii| max(|x|, 1 m)`` of the internal forces (stiff members under small
+        loads) and no longer falls.
+    tol_disp : float [m]
+        ... and the last translational increment is below ``tol_disp``.
+    force_floor : float [N]
+        Absolute floor of the residual scale (unloaded problems).
+    max_iter : int
+    max_rot_rad : float [rad]
+        Largest nodal rotation increment per iteration; larger steps are scaled down (keeps Newton inside the
+        range where spins are accurate).
+    max_step_m : float or None [m]
+        Largest translation increment per iteration (None: unlimited).
+    mode : "full" | "modified"
+        Refactor every iteration, or keep a factorisation while the residual falls by ``contraction`` per step.
+    max_backtracks : int
+        A Newton step that increases the residual norm is halved up to this many times (0: plain Newton).
+    """
+
+    def __init__(self, assembler: Assembler, tol_force: float = 1e-8, tol_disp: float = 1e-8,
+                 force_floor: float = 1e-6, max_iter: int = 40, max_rot_rad: float = 0.5,
+                 max_step_m: float | None = None, mode: str = "full", contraction: float = 0.25,
+                 max_backtracks: int = 0):
+        if mode not in ("full", "modified"):
+            raise ValueError(f"mode must be 'full' or 'modified', got {mode!r}")
+        self.asm = assembler
+        self.tol_force = tol_force
+        self.tol_disp = tol_disp
+        self.force_floor = force_floor
+        self.max_iter = max_iter
+        self.max_rot_rad = max_rot_rad
+        self.max_step_m = max_step_m
+        self.mode = mode
+        self.contraction = contraction
+        self.max_backtracks = max_backtracks
+        self._sel_cache: dict = {}
+        self._lu = None
+        self._lu_key = None
+        self.auto_fixed = np.flatnonzero(np.repeat(~assembler._node_used, DOF_PER_NODE))
+
+    def _reduced(self, fixed: np.ndarray):
+        key = fixed.tobytes()
+        hit = self._sel_cache.get(key)
+        if hit is None:
+            n = self.asm.n_dof
+            free = np.setdiff1d(np.arange(n), fixed)
+            idx = self.asm.matrix(np.arange(1, self.asm.nnz + 1, dtype=float))
+            sub = idx[free][:, free].tocsc()
+            sub.sort_indices()
+            hit = (free, sub.data.astype(np.int64) - 1, sub.indices.copy(), sub.indptr.copy(), key)
+            self._sel_cache[key] = hit
+        return hit
+
+    def forget_factorization(self) -> None:
+        self._lu = None
+        self._lu_key = None
+
+    def solve(self, state: NodalState, f_ext: np.ndarray, fixed_dofs=(), du_fixed=None) -> StaticResult:
+        """Equilibrium from the start ``state`` with loads ``f_ext`` held fixed.
+
+        Parameters
+        ----------
+        state : NodalState
+            Start (the previous solution for a warm start). Not modified.
+        f_ext : (n_dof,) float [N, N m]
+            External nodal loads (loads at prescribed DOF only enter the reactions).
+        fixed_dofs : int array
+            Prescribed DOF indices (unused nodes are fixed automatically).
+        du_fixed : float array like ``fixed_dofs`` or None
+            Increment of the prescribed DOF relative to ``state`` (None: held where they are).
+
+        Returns
+        -------
+        StaticResult
+        """
+        n = self.asm.n_dof
+        f_ext = np.asarray(f_ext, dtype=float)
+        if f_ext.shape != (n,):
+            raise ValueError(f"f_ext must have shape ({n},), got {f_ext.shape}")
+        if not np.all(np.isfinite(f_ext)):
+            raise ValueError("f_ext contains non-finite values")
+        fixed_in = np.asarray(fixed_dofs, dtype=np.int64).ravel()
+        fixed = np.union1d(fixed_in, self.auto_fixed)
+        free, sel, ind, ptr, key = self._reduced(fixed)
+        du0 = np.zeros(n)
+        if du_fixed is not None:
+            du_fixed = np.asarray(du_fixed, dtype=float).ravel()
+            if du_fixed.shape != fixed_in.shape:
+                raise ValueError("du_fixed must have the same length as fixed_dofs")
+            du0[fixed_in] = du_fixed
+        st = state.updated(du0) if np.any(du0) else state.copy()
+        history = []
+        nfac = 0
+        st_prev, du_last, n_back = None, None, 0
+        r_prev = np.inf
+        work_first, work_last = 0.0, np.inf  # |r . du| of the first and of the last Newton correction
+        f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
+        for it in range(1, self.max_iter + 1):
+            f_int, K = self.asm.assemble(st.x, st.Rn, tangent=True)
+            r = f_ext - f_int
+            rf = r[free]
+            rnorm = float(np.linalg.norm(rf))
+            if not np.isfinite(rnorm):
+                history.append((it, rnorm, np.nan))
+                raise ConvergenceError("non-finite residual in the static solve", history)
+            scale = max(f_scale, float(np.linalg.norm(r[fixed])))
+            # Round-off floor of f_int: an element force such as EA/L0 (l - L0) carries an absolute error of about
+            # eps |x| EA/L0, so with stiff members and small loads |r| can stagnate above tol_force * scale however
+            # many iterations are made. After at least one Newton correction, a residual below that floor counts as
+            # converged once the last correction is negligible in the energy norm (|r . du| relative to the first
+            # iteration's) or the residual has stopped falling (less than halved: Newton is stirring round-off).
+            if it == 1:  # from the start state only, so that a diverging iterate cannot inflate it
+                floor = _ROUNDOFF * np.finfo(float).eps * float(np.max(np.abs(K.diagonal()))) \
+                    * max(float(np.max(np.abs(st.x))), 1.0)
+            at_floor = it >= 2 and rnorm <= floor and (work_last <= _WORK_TOL * work_first or rnorm > 0.5 * r_prev)
+            last_du = history[-1][2] if history else np.inf
+            if at_floor or (rnorm <= self.tol_force * scale
+                            and (last_du <= self.tol_disp or rnorm <= 1e-3 * self.tol_force * scale)):
+                history.append((it, rnorm, 0.0))
+                return StaticResult(st, -r, it - 1, history, True, nfac)
+            # backtracking: a step that increased the residual is halved (at most max_backtracks times); the
+            # assembly of the trial state is reused as the next iteration's, so a backtrack costs one assembly
+            if st_prev is not None and rnorm > r_prev and n_back < self.max_backtracks:
+                n_back += 1
+                du_last *= 0.5
+                st = st_prev.updated(du_last)
+                history.append((it, rnorm, float(np.max(np.abs(du_last.reshape(-1, DOF_PER_NODE)[:, :3])))))
+                continue
+            n_back = 0
+            refactor = (self.mode == "full" or self._lu is None or self._lu_key != key
+                        or rnorm > self.contraction * r_prev)
+            if refactor:
+                Kff = sp.csc_matrix((K.data[sel], ind, ptr), shape=(free.size, free.size))
+                try:
+                    self._lu = spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
+                except RuntimeError as exc:  # singular matrix
+                    history.append((it, rnorm, np.nan))
+                    raise ConvergenceError(f"tangent factorisation failed: {exc}", history) from exc
+                self._lu_key = key
+                nfac += 1
+            duf = self._lu.solve(rf)
+            if not np.all(np.isfinite(duf)):
+                history.append((it, rnorm, np.nan))
+                raise ConvergenceError("non-finite Newton increment (singular tangent?)", history)
+            work_last = abs(float(rf @ duf))
+            if it == 1:
+                work_first = work_last
+            du = np.zeros(n)
+            du[free] = duf
+            d6 = du.reshape(-1, DOF_PER_NODE)
+            fac = 1.0
+            rot = float(np.max(np.linalg.norm(d6[:, 3:], axis=1))) if d6.size else 0.0
+            if rot > self.max_rot_rad:
+                fac = self.max_rot_rad / rot
+            if self.max_step_m is not None:
+                tr = float(np.max(np.linalg.norm(d6[:, :3], axis=1)))
+                if tr * fac > self.max_step_m:
+                    fac = self.max_step_m / tr
+            du *= fac
+            dnorm = float(np.max(np.abs(d6[:, :3]))) if d6.size else 0.0
+            history.append((it, rnorm, dnorm))
+            r_prev = rnorm
+            st_prev, du_last = st, du
+            st = st.updated(du)
+        f_int, _ = self.asm.assemble(st.x, st.Rn, tangent=False)
+        history.append((self.max_iter + 1, float(np.linalg.norm((f_ext - f_int)[free])), np.nan))
+        raise ConvergenceError(f"Newton did not converge in {self.max_iter} iterations", history)
