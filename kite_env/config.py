@@ -45,6 +45,7 @@ class StructureConfig:
     tip_rod_E_Pa: float = 30.0e9  # [Pa]
     # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
     te_wire_E_Pa: float = 5.5e8  # [Pa]
+    te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,8 @@ class AeroConfig:
 class FsiConfig:
     tol_disp_m: float = 1.0e-4  # coupling: max nodal position change between coupling iterations [m]
     tol_force_rel: float = 1.0e-3  # coupling: change of aero load vector relative to its norm [-]
-    max_coupling_iter: int = 60  # [-]
+    max_coupling_iter: int = 200  # [-]
+    newton_per_coupling: int = 4  # Newton iterations between two aero load updates [-]
     cold_load_steps: int = 6  # dynamic-pressure ramp for a cold start from the unloaded wing [-]
     relax_initial: float = 0.3  # first under-relaxation factor of the aero loads (Aitken thereafter) [-]
     relax_min: float = 0.02  # lower bound of the Aitken relaxation factor [-]
@@ -77,8 +79,9 @@ class Config:
 _POSITIVE = {
     "kite.n_sections", "kite.n_chord", "structure.canopy_E_Pa", "structure.canopy_thickness_m",
     "structure.tube_pressure_Pa", "structure.tube_wall_Et_N_per_m", "structure.tip_rod_E_Pa", "structure.te_wire_E_Pa",
+    "structure.te_hem_EI_Nm2",
     "aero.rho_kg_m3", "fsi.tol_disp_m", "fsi.tol_force_rel", "fsi.max_coupling_iter", "fsi.cold_load_steps",
-    "fsi.relax_initial", "fsi.relax_min",
+    "fsi.relax_initial", "fsi.relax_min", "fsi.newton_per_coupling",
 }
 
 
