@@ -59,6 +59,7 @@ class FsiConfig:
     tol_force_rel: float = 1.0e-3  # coupling: change of aero load vector relative to its norm [-]
     max_coupling_iter: int = 200  # [-]
     newton_per_coupling: int = 4  # Newton iterations between two aero load updates [-]
+    max_bridle_step_m: float = 0.02  # larger bridle-point moves are applied in converged sub-steps [m]
     cold_load_steps: int = 6  # dynamic-pressure ramp for a cold start from the unloaded wing [-]
     relax_initial: float = 0.3  # first under-relaxation factor of the aero loads (Aitken thereafter) [-]
     relax_min: float = 0.02  # lower bound of the Aitken relaxation factor [-]
@@ -81,7 +82,7 @@ _POSITIVE = {
     "structure.tube_pressure_Pa", "structure.tube_wall_Et_N_per_m", "structure.tip_rod_E_Pa", "structure.te_wire_E_Pa",
     "structure.te_hem_EI_Nm2",
     "aero.rho_kg_m3", "fsi.tol_disp_m", "fsi.tol_force_rel", "fsi.max_coupling_iter", "fsi.cold_load_steps",
-    "fsi.relax_initial", "fsi.relax_min", "fsi.newton_per_coupling",
+    "fsi.relax_initial", "fsi.relax_min", "fsi.newton_per_coupling", "fsi.max_bridle_step_m",
 }
 
 

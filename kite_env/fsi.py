@@ -236,8 +236,19 @@ class AeroelasticWing:
             ramp = list(np.arange(1, n + 1) / n)
         history: list[dict] = []
         sol = None
-        for scale in ramp:
+        # large moves of the bridle points are applied in sub-steps of at most fsi.max_bridle_step_m, each one
+        # converged, so that the coupling always starts close to the solution (a large jump can carry the
+        # flexible tips onto a collapsed branch)
+        q_start = state.x[self.bridle].copy()
+        move = float(np.max(np.linalg.norm(q_b - q_start, axis=1)))
+        if support == "lines":
+            move = float(np.max(np.abs((q_b - q_start)[:, [0, 2]])))
+        n_sub = max(1, int(np.ceil(move / self.cfg.fsi.max_bridle_step_m)))
+        for scale in ramp[:-1]:
             state, sol = self._couple(state, q_b, flight, dt, support, scale, history)
+        for k in range(1, n_sub + 1):
+            q_k = q_start + (q_b - q_start) * (k / n_sub)
+            state, sol = self._couple(state, q_k, flight, dt, support, ramp[-1], history)
         sol.history = history
         if commit:
             self.state = state
@@ -322,6 +333,8 @@ class AeroelasticWing:
                 break
             f_prev = f_aero
         else:
+            self.last_failure = {"state": state.copy(), "f_ext": f_ext.copy(), "fixed": fixed.copy(),
+                                 "du_fixed": np.array(du_fixed, copy=True)}
             raise WingConvergenceError(
                 f"static aeroelastic coupling did not converge in {fcfg.max_coupling_iter} iterations "
                 f"(tol_disp_m={fcfg.tol_disp_m}, tol_force_rel={fcfg.tol_force_rel})", history)

@@ -1,0 +1,105 @@
+"""Static aeroelastic wing (Fig. 2, Eq. 1-9): convergence, force balance, nominal state, steering twist.
+
+One cold solve of the rhino16 wing at 25 m/s is shared by the tests (module fixture). The kite angle of attack
+16 deg (inflow against x_k, frame K from the tip bridle points) puts the loaded mid-wing sections near the paper's
+in-flight value; in flight it is set by the bridle geometry (flight-dynamics issue), here it is an input.
+"""
+
+import numpy as np
+import pytest
+
+from kite_env.config import Config
+from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
+from kite_env.geometry import build_kite
+from kite_env.polar import reference_values
+
+AIRSPEED = 25.0
+ALPHA_K = np.deg2rad(16.0)
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    wing = AeroelasticWing(build_kite("rhino16"), Config())
+    flight = FlightState.wind_tunnel(AIRSPEED, ALPHA_K)
+    sol = wing.solve(None, flight, support="lines", warm=False)
+    return wing, flight, sol, wing.state.copy()
+
+
+def test_force_balance(nominal):
+    wing, _, sol, _ = nominal
+    # F_b is the force of the bridle on the wing (Eq. 1, second block): it balances the aerodynamic force up to
+    # the coupling tolerance (loads of the last coupling iteration vs the converged shape)
+    tol = 2 * wing.cfg.fsi.tol_force_rel * np.linalg.norm(sol.aero_force)
+    np.testing.assert_allclose(sol.F_b.sum(axis=0), -sol.aero_force, atol=tol)
+    # and the aerodynamic force is the sum of the section forces
+    np.testing.assert_allclose(sol.section_forces.sum(axis=(0, 1)), sol.aero_force, rtol=1e-12)
+
+
+def test_nominal_state_is_physical(nominal):
+    wing, _, sol, _ = nominal
+    area, _ = reference_values(wing)
+    q = 0.5 * wing.cfg.aero.rho_kg_m3 * AIRSPEED**2
+    CL, CD = sol.lift / (q * area), sol.drag / (q * area)
+    assert 0.4 < CL < 1.2
+    assert 0.03 < CD < 0.2
+    assert 5.0 < sol.lift_to_drag < 20.0
+    # traction of the order of the paper's 3-6 kN at about 25 m/s apparent wind
+    assert 2.5e3 < np.linalg.norm(sol.aero_force) < 7e3
+    mid = np.rad2deg(sol.alpha[len(sol.alpha) // 2])
+    assert 2.0 < mid < 12.0  # paper: about 7.5 deg in flight
+    assert np.all(np.abs(np.rad2deg(sol.alpha)) < 20.0)  # attached flow everywhere
+    # symmetric bridle, symmetric flow: symmetric result
+    np.testing.assert_allclose(sol.alpha, sol.alpha[::-1], atol=1e-5)
+    # the loaded centre is pushed to +z_k and the tips are drawn inward (paper: about 1 m)
+    A, _, C, _ = wing.bridle
+    reduction = np.linalg.norm(wing.mesh.nodes[A] - wing.mesh.nodes[C]) - np.linalg.norm(sol.nodes[A] - sol.nodes[C])
+    assert 0.2 < reduction < 1.5
+    centre = wing.mesh.sections[len(sol.alpha) // 2, 0]
+    assert sol.nodes[centre, 2] > wing.mesh.nodes[centre, 2]
+
+
+def test_warm_start_reproduces_and_is_cheap(nominal):
+    wing, flight, sol, state = nominal
+    wing.state = state.copy()
+    again = wing.solve(sol.nodes[wing.bridle], flight, support="prescribed", warm=True, commit=False)
+    assert again.coupling_iters <= 3
+    np.testing.assert_allclose(again.nodes, sol.nodes, atol=5 * wing.cfg.fsi.tol_disp_m)
+
+
+def test_steering_line_twists_the_wing(nominal):
+    wing, flight, sol, state = nominal
+    wing.state = state.copy()
+    q = sol.nodes[wing.bridle].copy()
+    e = wing.kcu_position() - q[1]
+    q[1] += 0.05 * e / np.linalg.norm(e)  # right steering line 5 cm shorter: B pulled towards the KCU
+    steer = wing.solve(q, flight, support="prescribed", warm=True, commit=False)
+    d_alpha = np.rad2deg(steer.alpha - sol.alpha)
+    n = len(d_alpha)
+    right, left = d_alpha[: n // 6].mean(), d_alpha[-(n // 6):].mean()
+    assert right > 0.5  # angle of attack up at the pulled (right) tip
+    assert left < 0.0  # and down at the other
+    # the right-tip section force grows relative to the left one
+    f_right = np.linalg.norm(steer.section_forces[: n // 6].sum(axis=(0, 1)))
+    f_left = np.linalg.norm(steer.section_forces[-(n // 6):].sum(axis=(0, 1)))
+    assert f_right > f_left
+
+
+def test_non_convergence_raises_with_history():
+    cfg = Config()
+    import dataclasses
+
+    cfg = dataclasses.replace(cfg, fsi=dataclasses.replace(cfg.fsi, max_coupling_iter=2))
+    wing = AeroelasticWing(build_kite("rhino16", n_sections=11, n_chord=4), cfg)
+    with pytest.raises(WingConvergenceError) as exc:
+        wing.solve(None, FlightState.wind_tunnel(AIRSPEED, ALPHA_K), support="lines", warm=False)
+    assert len(exc.value.history) >= 2
+    assert "did not converge" in str(exc.value)
+
+
+def test_bad_input_rejected():
+    wing = AeroelasticWing(build_kite("rhino16", n_sections=11, n_chord=4), Config())
+    fl = FlightState.wind_tunnel(AIRSPEED, ALPHA_K)
+    with pytest.raises(ValueError, match="non-finite"):
+        wing.solve(np.full((4, 3), np.nan), fl)
+    with pytest.raises(ValueError, match="support"):
+        wing.solve(None, fl, support="glue")
