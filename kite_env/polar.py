@@ -123,9 +123,19 @@ def sweep(wing: AeroelasticWing, airspeed_mps: float, alphas_deg, start_alpha_de
             a = alphas[i]
             flight = FlightState.wind_tunnel(airspeed_mps, np.deg2rad(a))
             try:
-                if start_state is None:
-                    wing.solve(None, flight, support=support, warm=False)
-                points[i] = _point(wing, flight, a, area, c_ref, rho, airspeed_mps, support)
+                try:
+                    if start_state is None:
+                        wing.solve(None, flight, support=support, warm=False)
+                    points[i] = _point(wing, flight, a, area, c_ref, rho, airspeed_mps, support)
+                except WingConvergenceError:
+                    # second attempt: cold start with the dynamic-pressure ramp from the unloaded wing
+                    good = wing.state.copy()
+                    try:
+                        wing.solve(None, flight, support=support, warm=False)
+                        points[i] = _point(wing, flight, a, area, c_ref, rho, airspeed_mps, support)
+                    except WingConvergenceError:
+                        wing.state = good
+                        raise
             except WingConvergenceError as exc:
                 first_line = str(exc).splitlines()[0]
                 points[i] = PolarPoint(float(a), *([np.nan] * 6), 0, 0, False, first_line)

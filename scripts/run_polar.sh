@@ -5,6 +5,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
 if [ "$#" -eq 0 ]; then
-  set -- --kite rhino16 --airspeed 25 --alpha-deg -5:20:1 --out runs/polar_rhino16
+  set -- --kite rhino16 --airspeed 25 --alpha-deg 14:22:1 --out runs/polar_rhino16
 fi
 exec .venv/bin/kite-polar "$@"
