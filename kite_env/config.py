@@ -167,8 +167,8 @@ def _validate(cfg: Config) -> None:
                 raise ConfigError(f"config key '{key}' must be positive, got {v!r}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:
         raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
-    if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 5:
-        raise ConfigError(f"config key 'kite.n_sections' must be odd and >= 5, got {cfg.kite.n_sections}")
+    if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 7:
+        raise ConfigError(f"config key 'kite.n_sections' must be odd and >= 7, got {cfg.kite.n_sections}")
     if cfg.kite.n_chord < 3:
         raise ConfigError(f"config key 'kite.n_chord' must be >= 3, got {cfg.kite.n_chord}")
 
