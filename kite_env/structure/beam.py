@@ -102,13 +102,20 @@ class BeamSet:
         Bending stiffness about the local y axis (``up``) and about the local z axis.
     GJ : (n_e,) float [N m^2]
         Torsional stiffness.
+    backend : {"auto", "numba", "numpy"}
+        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.beam_internal`
+        or the vectorised NumPy reference below (same result to round-off); ``"auto"`` resolves with
+        :func:`kite_env.structure.kernels.resolve_backend` (numba when importable).
 
     Scalars are broadcast to ``(n_e,)``.
     """
 
     n_en = 2  # nodes per element
 
-    def __init__(self, conn, X0, up, EA, EI2, EI3, GJ):
+    def __init__(self, conn, X0, up, EA, EI2, EI3, GJ, backend="auto"):
+        from . import kernels  # imports numba (once per process)
+
+        self.backend = kernels.resolve_backend(backend)
         self.conn = np.asarray(conn, dtype=np.int64).reshape(-1, 2)
         X0 = np.asarray(X0, dtype=float)
         n_e = self.conn.shape[0]
@@ -211,7 +218,30 @@ class BeamSet:
         -------
         f_e : (n_e, 12) float [N, N m]   gradient of the strain energy w.r.t. ``[du1, dw1, du2, dw2]``.
         K_e : (n_e, 12, 12) float        ``d f_e / d[du1, dw1, du2, dw2]`` (exact, all geometric terms).
+
+        Both are new arrays on every call (whatever the backend).
         """
+        if self.backend == "numba":
+            return self._internal_numba(x_e, R_e)
+        return self._internal_numpy(x_e, R_e)
+
+    def _internal_numba(self, x_e, R_e):
+        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.beam_internal`."""
+        from .kernels import beam_internal
+
+        x_e = np.ascontiguousarray(x_e, dtype=float)
+        R_e = np.ascontiguousarray(R_e, dtype=float)
+        n = self.n_elem
+        if x_e.shape != (n, 2, 3) or R_e.shape != (n, 2, 3, 3):
+            raise ValueError(f"BeamSet.internal: expected x_e (n_e, 2, 3) and R_e (n_e, 2, 3, 3) with n_e = {n}, "
+                             f"got {x_e.shape} and {R_e.shape}")
+        f = np.empty((n, 12))
+        K = np.empty((n, 12, 12))
+        beam_internal(x_e, R_e, self.R0, self.L0, self.EA, self._k11, self._k12, f, K, np.empty(n))
+        return f, K
+
+    def _internal_numpy(self, x_e, R_e):
+        """:meth:`internal`, vectorised NumPy reference implementation."""
         l, r1, r2, r3, q, qn, Rr, th = self._frame(x_e, R_e)
         n = l.shape[0]
         L0 = self.L0

@@ -26,10 +26,12 @@ converges at ``1e-8``.
 
 Practical notes: a flat, stress-free membrane has no out-of-plane stiffness other than the (tiny) bending,
 so a pressure load applied to a flat canopy from rest needs a bulged start, load stepping or a step limit.
-Cost: ``internal`` at 360 elements takes ~10 ms (best of repeats; 9-15 ms) on the shared 2-core development
-container, where ``BeamSet`` at 107 elements takes ~4 ms; the membrane is ~1.5 ms of it, the rest is the exact
-co-rotational bending tangent (``bending=False``: ~2 ms, but then rotations of canopy-only nodes have no
-stiffness and must be held fixed).
+Cost: with the NumPy reference (``backend="numpy"``) ``internal`` at 360 elements takes ~10 ms (best of repeats;
+9-15 ms) on the shared 2-core development container, where ``BeamSet`` at 107 elements takes ~4 ms; the membrane
+is ~1.5 ms of it, the rest is the exact co-rotational bending tangent (``bending=False``: ~2 ms, but then
+rotations of canopy-only nodes have no stiffness and must be held fixed).  The compiled kernel
+(``backend="numba"``, the default when numba is installed; :mod:`kite_env.structure.kernels`) computes the same
+result to round-off in ~0.6 ms (``BeamSet``: ~0.18 ms).
 
 The DOF order per node is ``[du_x, du_y, du_z, dw_x, dw_y, dw_z]`` (spatial spins, frame K), as for
 every element set; see :mod:`kite_env.structure.rotations`.
@@ -69,11 +71,20 @@ class ShellSet:
         Drilling stiffness ``k_d = drill_factor * E h A0`` [N m/rad] per node and element.
     bending : bool
         Include the DKT bending and drilling part (False: pure membrane, rotations get no stiffness).
+    backend : {"auto", "numba", "numpy"}
+        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.shell_internal`
+        or the vectorised NumPy reference (same result to round-off); ``"auto"`` resolves with
+        :func:`kite_env.structure.kernels.resolve_backend` (numba when importable).  :meth:`energy` and
+        :meth:`stresses` always use NumPy.
     """
 
     n_en = 3  # nodes per element
 
-    def __init__(self, conn, X0, E, nu, h, wrinkling=True, eps_slack=1e-3, drill_factor=1e-6, bending=True):
+    def __init__(self, conn, X0, E, nu, h, wrinkling=True, eps_slack=1e-3, drill_factor=1e-6, bending=True,
+                 backend="auto"):
+        from . import kernels  # imports numba (once per process)
+
+        self.backend = kernels.resolve_backend(backend)
         self.conn = np.asarray(conn, dtype=np.int64).reshape(-1, 3)
         X0 = np.asarray(X0, dtype=float)
         n_e = self.conn.shape[0]
@@ -137,7 +148,31 @@ class ShellSet:
         f_e : (n_e, 18) float [N, N m]   gradient of the strain energy w.r.t. ``[du_a, dw_a]`` per node a.
         K_e : (n_e, 18, 18) float        exact derivative of ``f_e`` (spatial spins; not symmetric away
                                          from equilibrium because of the non-additive rotations).
+
+        Both are new arrays on every call (whatever the backend).
         """
+        if self.backend == "numba":
+            return self._internal_numba(x_e, R_e)
+        return self._internal_numpy(x_e, R_e)
+
+    def _internal_numba(self, x_e, R_e):
+        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.shell_internal`."""
+        from .kernels import shell_internal
+
+        x_e = np.ascontiguousarray(x_e, dtype=float)
+        R_e = np.ascontiguousarray(R_e, dtype=float)
+        n = self.n_elem
+        if x_e.shape != (n, 3, 3) or R_e.shape != (n, 3, 3, 3):
+            raise ValueError(f"ShellSet.internal: expected x_e (n_e, 3, 3) and R_e (n_e, 3, 3, 3) with n_e = {n}, "
+                             f"got {x_e.shape} and {R_e.shape}")
+        f = np.empty((n, 18))
+        K = np.empty((n, 18, 18))
+        shell_internal(x_e, R_e, self.R0, self.G, self.A0h, self.E, self.nu, self.C, self.K_l, self.eps_slack,
+                       self.wrinkling, self.bending, f, K, np.empty(n))
+        return f, K
+
+    def _internal_numpy(self, x_e, R_e):
+        """:meth:`internal`, vectorised NumPy reference implementation."""
         x_e = np.asarray(x_e, dtype=float)
         n = x_e.shape[0]
         _, fm, Km, _ = self._membrane(x_e)

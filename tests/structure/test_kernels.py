@@ -1,0 +1,273 @@
+"""The compiled element kernels (kite_env.structure.kernels) against the NumPy reference implementations.
+
+For random large-deformation states (taut, wrinkled and slack membranes; large and tiny rotations, so that every
+series / closed-form branch of the rotation functions is taken) and for the real kite mesh, the numba and numpy
+backends of ``BeamSet`` and ``ShellSet`` must give the same force, tangent and energy to 1e-10 relative (they
+differ only by round-off).  The finite-difference tangent and wrinkling tests of ``test_beam.py`` and
+``test_shell.py`` are run again through each backend explicitly.
+"""
+
+import numpy as np
+import pytest
+import test_beam as _tb  # noqa: I001  (sibling test modules: re-run their checks per backend)
+import test_shell as _ts
+
+from kite_env.geometry import build_kite
+from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
+from kite_env.structure import kernels
+from kite_env.structure.beam import BeamSet
+from kite_env.structure.rotations import expm
+from kite_env.structure.shell import SLACK, TAUT, WRINKLED, ShellSet
+from kite_env.structure.shell_bending import element_frame, local_rotations
+
+RTOL = 1e-10
+E_CANOPY, NU, H_CANOPY = 1250e6, 0.3, 0.08e-3
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _per_element_rel(a, b, floor=0.0):
+    """Largest ``max|a_e - b_e| / max(max|b_e|, floor_e)`` over elements ``e`` (leading axis)."""
+    ax = tuple(range(1, a.ndim))
+    scale = np.maximum(np.max(np.abs(b), axis=ax), floor)
+    return np.max(np.max(np.abs(a - b), axis=ax) / scale)
+
+
+def _force_floor(K, x):
+    """Force scale below which ``f`` is cancellation noise: ``K`` times a relative displacement of 1e-5.
+
+    Near the unloaded state ``f`` is a small difference of large terms (``l - L0`` of coordinates ``|x|``), so
+    both backends carry an absolute round-off of ~1e-16 ``|K| |x|``; relative agreement is asked above this floor.
+    """
+    return 1e-5 * np.max(np.abs(K), axis=(1, 2)) * np.max(np.abs(x), axis=(1, 2))
+
+
+def _assert_energy_agree(U, U_ref, K, x):
+    floor = np.max(np.abs(K)) * (1e-5 * np.max(np.abs(x))) ** 2
+    assert np.allclose(U, U_ref, rtol=RTOL, atol=RTOL * max(np.max(np.abs(U_ref)), floor))
+
+
+def _pair(cls, *args, **kw):
+    return cls(*args, backend="numba", **kw), cls(*args, backend="numpy", **kw)
+
+
+def _assert_beams_agree(conn, X0, up, stiff, x, Rn):
+    bn, bp = _pair(BeamSet, conn, X0, up, **stiff)
+    xe, Re = x[conn], Rn[conn]
+    f1, K1 = bn.internal(xe, Re)
+    f2, K2 = bp.internal(xe, Re)
+    assert f1.shape == f2.shape and K1.shape == K2.shape
+    assert _per_element_rel(f1, f2, _force_floor(K2, xe)) < RTOL
+    assert _per_element_rel(K1, K2) < RTOL
+    # energy of the kernel (not used by BeamSet.energy, which stays NumPy)
+    n = bn.n_elem
+    U = np.empty(n)
+    kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, np.empty((n, 12)), np.empty((n, 12, 12)), U)
+    _assert_energy_agree(U, bp.energy(xe, Re), K2, xe)
+    return bp.local_deformation(xe, Re)
+
+
+def _assert_shells_agree(s_args, x, R, **kw):
+    sn, sp = _pair(ShellSet, *s_args, **kw)
+    f1, K1 = sn.internal(x, R)
+    f2, K2 = sp.internal(x, R)
+    assert _per_element_rel(f1, f2, _force_floor(K2, x)) < RTOL
+    assert _per_element_rel(K1, K2) < RTOL
+    n = sn.n_elem
+    U = np.empty(n)
+    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.wrinkling,
+                           sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U)
+    _assert_energy_agree(U, sp.energy(x, R), K2, x)
+    return sp
+
+
+# ---------------------------------------------------------------------------------------------- backend switch
+def test_resolve_backend(monkeypatch):
+    monkeypatch.delenv(kernels.ENV_VAR, raising=False)
+    assert kernels.resolve_backend("auto") == "numba"
+    assert kernels.resolve_backend("numpy") == "numpy"
+    monkeypatch.setenv(kernels.ENV_VAR, "numpy")
+    assert kernels.resolve_backend("auto") == "numpy"
+    assert kernels.resolve_backend("numba") == "numba"  # an explicit choice wins over the variable
+    monkeypatch.setenv(kernels.ENV_VAR, "fortran")
+    with pytest.raises(ValueError):
+        kernels.resolve_backend("auto")
+    with pytest.raises(ValueError):
+        kernels.resolve_backend("cuda")
+
+
+def test_thresholds_equal_reference_modules():
+    """The kernels hard-code the branch thresholds of the reference functions (numba caches on kernels.py only)."""
+    import inspect
+
+    from kite_env.structure import beam, rotations, shell_bending, shell_membrane
+
+    assert kernels._ROT_SMALL == rotations._SMALL
+    assert kernels._TSMALL == beam._TSMALL
+    assert kernels._TAUT_TOL == shell_membrane.TAUT_TOL
+    assert "small = t < 1e-4" in inspect.getsource(rotations.tangent_inv) and kernels._TINV_SMALL == 1e-4
+    src = inspect.getsource(shell_bending._log_rotation)
+    assert "small = s < 1e-4" in src and kernels._LOGROT_SMALL == 1e-4
+    assert "far = c < 1e-3" in src and kernels._LOGROT_FAR == 1e-3
+
+
+def test_outputs_are_fresh_arrays_and_shapes_checked():
+    """Callers (the finite-difference tests) keep the result of one call while making the next one."""
+    rng = np.random.default_rng(0)
+    bs, X0, conn = _tb.random_beams(rng, 4)
+    bn = BeamSet(conn, X0, rng.normal(size=(4, 3)), EA=bs.EA, EI2=bs.EI2, EI3=bs.EI3, GJ=bs.GJ, backend="numba")
+    x, Rn = _tb.deformed_state(rng, X0, 0.5)
+    f1, K1 = bn.internal(x[conn], Rn[conn])
+    f1c, K1c = f1.copy(), K1.copy()
+    f2, _ = bn.internal(X0[conn], np.broadcast_to(np.eye(3), (len(X0), 3, 3))[conn])  # unloaded
+    assert np.array_equal(f1, f1c) and np.array_equal(K1, K1c)
+    assert np.max(np.abs(f2)) < 1e-12 * np.max(np.abs(f1))
+    with pytest.raises(ValueError):
+        bn.internal(x[conn][:2], Rn[conn][:2])
+
+
+# ---------------------------------------------------------------------------------------------- beams
+@pytest.mark.parametrize("rot_scale", [1e-9, 0.05, 1.0, 2.5])
+def test_random_beams_agree(rot_scale):
+    """Tiny (series of logm and T_s^-1), small (series of the T_s^-T derivative), large and very large rotations."""
+    rng = np.random.default_rng(20)
+    n = 40
+    X0 = rng.normal(size=(2 * n, 3))
+    conn = np.arange(2 * n).reshape(n, 2)
+    stiff = dict(EA=rng.uniform(50, 200, n), EI2=rng.uniform(1, 5, n), EI3=rng.uniform(1, 5, n),
+                 GJ=rng.uniform(1, 5, n))
+    x = X0 + min(0.2, 0.2 * rot_scale) * rng.normal(size=X0.shape)
+    Rn = expm(rot_scale * rng.normal(size=X0.shape))
+    d = _assert_beams_agree(conn, X0, rng.normal(size=(n, 3)), stiff, x, Rn)
+    t = np.linalg.norm(np.concatenate([d["theta1"], d["theta2"]]), axis=1)
+    if rot_scale < 1e-6:
+        assert np.max(t) < 1e-6
+    elif rot_scale < 0.1:
+        assert np.max(t) < 0.2  # all in the Taylor branch of beam._tinv_derivative_coeffs
+    else:
+        assert np.max(t) > (2.0 if rot_scale > 2 else 0.5)
+
+
+def test_unloaded_and_rigidly_rotated_beams_agree():
+    rng = np.random.default_rng(21)
+    bs, X0, conn = _tb.random_beams(rng, 10)
+    up = rng.normal(size=(10, 3))
+    stiff = dict(EA=bs.EA, EI2=bs.EI2, EI3=bs.EI3, GJ=bs.GJ)
+    Q = expm(np.array([1.3, -2.1, 0.7]))
+    for x, Rn in ((X0, np.broadcast_to(np.eye(3), (len(X0), 3, 3))),
+                  (X0 @ Q.T + 3.0, np.broadcast_to(Q, (len(X0), 3, 3)))):
+        bn, bp = _pair(BeamSet, conn, X0, up, **stiff)
+        _, K1 = bn.internal(x[conn], Rn[conn])
+        _, K2 = bp.internal(x[conn], Rn[conn])
+        assert _per_element_rel(K1, K2) < RTOL
+
+
+@pytest.fixture(scope="module")
+def kite():
+    return build_kite("rhino16")
+
+
+def _kite_beam_stiffness(mesh):
+    """Order-of-magnitude section data per beam kind (only used to compare the backends)."""
+    d = mesh.beam_diameter
+    kind = mesh.beam_kind
+    EA = np.where((kind == BEAM_LE) | (kind == BEAM_STRUT), 2e4 * np.pi * d, 1e9 * np.pi * d**2 / 4)
+    EI = np.where((kind == BEAM_LE) | (kind == BEAM_STRUT), 50.0 * d, 1e9 * np.pi * d**4 / 64)
+    EI = np.where(kind == BEAM_TE, 0.4, EI)
+    return dict(EA=EA, EI2=EI, EI3=1.3 * EI, GJ=0.8 * EI)
+
+
+@pytest.mark.parametrize("amp", [0.0, 0.02, 0.3])
+def test_kite_mesh_beams_agree(kite, amp):
+    """LE tube, struts, tip rods and TE wire of the rhino16 mesh (107 beams), unloaded and deformed."""
+    assert {BEAM_LE, BEAM_STRUT, BEAM_TIP, BEAM_TE} <= set(kite.beam_kind.tolist())
+    rng = np.random.default_rng(22)
+    x = kite.nodes + amp * rng.normal(size=kite.nodes.shape)
+    Rn = expm(5 * amp * rng.normal(size=kite.nodes.shape))
+    _assert_beams_agree(kite.beams, kite.nodes, kite.beam_up, _kite_beam_stiffness(kite), x, Rn)
+
+
+# ---------------------------------------------------------------------------------------------- shells
+@pytest.mark.parametrize("wrinkling, bending", [(True, True), (False, True), (True, False)])
+@pytest.mark.parametrize("rot_scale", [0.05, 0.6, 2.0])
+def test_random_shells_agree_in_all_membrane_states(wrinkling, bending, rot_scale):
+    rng = np.random.default_rng(30)
+    Fins = [[[1.03, 0.01], [0.0, 1.02]], [[1.04, 0.02], [0.0, 0.97]], [[0.97, 0.01], [0.0, 0.96]]]
+    xs, Rs, Xs = [], [], []
+    for Fin in Fins:  # taut, wrinkled, slack
+        X = _ts._tilted_triangles(rng, 8)
+        _, x, R = _ts._deformed(rng, X, np.array(Fin), rot_scale)
+        Xs.append(X)
+        xs.append(x)
+        Rs.append(R)
+    X, x, R = np.concatenate(Xs), np.concatenate(xs), np.concatenate(Rs)
+    x = x + 0.02 * rng.normal(size=x.shape)  # out-of-plane and shear on top: mixed states, frame rotation
+    n = X.shape[0]
+    args = (np.arange(3 * n).reshape(n, 3), X.reshape(-1, 3), E_CANOPY, NU, 0.002)
+    sp = _assert_shells_agree(args, x, R, wrinkling=wrinkling, bending=bending)
+    if wrinkling:
+        assert set(sp.stresses(x)["state"].tolist()) == {TAUT, WRINKLED, SLACK}
+    th = np.linalg.norm(local_rotations(element_frame(x)["Rr"], R, sp.R0), axis=-1)
+    if rot_scale > 1.0:  # quaternion branch of shell_bending._log_rotation (cos t < 1e-3)
+        assert np.max(th) > 0.5 * np.pi + 1e-3
+    if rot_scale < 0.1:  # series branch of the T_s^-T derivative for some nodes
+        assert np.min(th) < 0.2
+
+
+def test_stress_free_shells_agree():
+    """Rigid placements: round-off strains on either side of the taut boundary (TAUT_TOL), zero rotations."""
+    rng = np.random.default_rng(31)
+    X = _ts._tilted_triangles(rng, 12)
+    n = X.shape[0]
+    Q = expm(np.array([0.3, -1.2, 2.0]))
+    conn = np.arange(3 * n).reshape(n, 3)
+    for x, R in ((X, np.broadcast_to(np.eye(3), (n, 3, 3, 3))),
+                 (X @ Q.T + 7.0, np.broadcast_to(Q, (n, 3, 3, 3)))):
+        sn, sp = _pair(ShellSet, conn, X.reshape(-1, 3), E_CANOPY, NU, H_CANOPY)
+        f1, K1 = sn.internal(x, R)
+        f2, K2 = sp.internal(x, R)
+        assert _per_element_rel(K1, K2) < RTOL
+        assert np.max(np.abs(f1 - f2)) < 1e-12 * E_CANOPY * H_CANOPY
+        assert np.all(sp.stresses(x)["state"] == TAUT)
+
+
+@pytest.mark.parametrize("amp", [0.0, 0.01, 0.1])
+def test_kite_mesh_shells_agree(kite, amp):
+    """The 360 canopy triangles of the rhino16 mesh, unloaded and deformed (mixed membrane states)."""
+    rng = np.random.default_rng(32)
+    x = kite.nodes + amp * rng.normal(size=kite.nodes.shape)
+    Rn = expm(5 * amp * rng.normal(size=kite.nodes.shape))
+    conn = kite.shells
+    sp = _assert_shells_agree((conn, kite.nodes, E_CANOPY, NU, H_CANOPY), x[conn], Rn[conn])
+    if amp > 0.05:
+        assert len(set(sp.stresses(x[conn])["state"].tolist())) == 3
+
+
+# ------------------------------------------------------------------------------------- existing tests per backend
+@pytest.fixture(params=["numba", "numpy"])
+def backend(request, monkeypatch):
+    """Route ``backend="auto"`` of every element set built inside a test to one backend."""
+    monkeypatch.setenv(kernels.ENV_VAR, request.param)
+    assert BeamSet([[0, 1]], np.eye(3)[:2], [0.0, 0.0, 1.0], 1.0, 1.0, 1.0, 1.0).backend == request.param
+    assert ShellSet([[0, 1, 2]], np.eye(3), 1.0, 0.3, 1.0).backend == request.param
+    return request.param
+
+
+@pytest.mark.parametrize("rot_scale", [0.05, 1.0])
+def test_beam_fd_tangent_per_backend(backend, rot_scale):
+    _tb.test_tangent_matches_central_difference(rot_scale)
+    _tb.test_internal_force_is_self_equilibrated()
+
+
+@pytest.mark.parametrize("regime, Fin", [
+    ("taut", [[1.03, 0.01], [0.0, 1.02]]),
+    ("wrinkled", [[1.04, 0.02], [0.0, 0.97]]),
+    ("slack", [[0.97, 0.01], [0.0, 0.96]]),
+])
+def test_shell_fd_tangent_per_backend(backend, regime, Fin):
+    _ts.test_tangent_matches_finite_difference(regime, Fin)
+
+
+def test_shell_wrinkling_per_backend(backend):
+    _ts.test_wrinkling_force_continuous_across_state_boundaries()
+    _ts.test_stress_free_state_has_linear_elastic_cst_tangent()
+    _ts.test_rigid_body_motion_gives_zero_force()
