@@ -304,8 +304,6 @@ class AeroelasticWing:
                 res = solver.solve(state, f_ext, fixed, du_fixed, max_iter=fcfg.newton_per_coupling,
                                    allow_partial=True)
             except ConvergenceError as exc:
-                self.last_failure = {"state": state.copy(), "f_ext": f_ext.copy(), "fixed": fixed.copy(),
-                                     "du_fixed": np.array(du_fixed, copy=True)}
                 history.append({"iter": it, "dx_max_m": np.nan, "dload_rel": dload, "newton_iters": -1})
                 raise WingConvergenceError(f"structural Newton solve failed in coupling iteration {it}: {exc}",
                                            history) from exc
@@ -317,9 +315,13 @@ class AeroelasticWing:
             entry = {"iter": it, "dx_max_m": dx, "dload_rel": dload, "newton_iters": res.iterations, "scale": scale,
                      "relax": omega, "newton_converged": res.converged, "residual_N": res.history[-1][1],
                      "dx_node": int(np.argmax(dxn))}
+            # wing internal force at A-D from the solver's reactions (f_int - f_ext at the returned state), without
+            # the bridle-line elements: no extra assembly
+            fi_b = (res.reactions + f_ext).reshape(-1, 6)[b, :3]
             if support == "lines":
+                fi_b = fi_b - self.lines.internal(state.x[b][:, None, :], None)[0][:, :3]
                 # line tension T = pull of the wing along its line (Eq. 1, second block, projected on the line)
-                F_b = self._wing_reactions(state, f_ext)
+                F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]
                 e_in = self.lines.anchor - state.x[b]
                 e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
                 T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
@@ -333,15 +335,13 @@ class AeroelasticWing:
                 break
             f_prev = f_aero
         else:
-            self.last_failure = {"state": state.copy(), "f_ext": f_ext.copy(), "fixed": fixed.copy(),
-                                 "du_fixed": np.array(du_fixed, copy=True)}
             raise WingConvergenceError(
                 f"static aeroelastic coupling did not converge in {fcfg.max_coupling_iter} iterations "
                 f"(tol_disp_m={fcfg.tol_disp_m}, tol_force_rel={fcfg.tol_force_rel})", history)
         # final aero loads on the converged shape and reactions F_b (second block of Eq. 1)
         loads = self._aero(state, flight, dt)
         f_ext = self._load_vector(loads, scale)
-        F_b = self._wing_reactions(state, f_ext)
+        F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]  # F_b = F_i^b - F_a^b (Eq. 1, second block)
         v_ref = flight.v_kite - flight.v_wind
         tot = wing_totals(loads, v_ref)
         sol = WingSolution(
@@ -351,11 +351,6 @@ class AeroelasticWing:
             tube_collapsed=collapsed, section_forces=scale * loads.nodal_forces,
         )
         return state, sol
-
-    def _wing_reactions(self, state: NodalState, f_ext: np.ndarray) -> np.ndarray:
-        """F_b = F_i^b - F_a^b (Eq. 1, second block): force of the bridle on the wing at A-D, (4, 3) [N]."""
-        f_int, _ = self.assembler.assemble(state.x, state.Rn, tangent=False)
-        return (f_int - f_ext).reshape(-1, 6)[self.bridle, :3].copy()
 
 
 class BridleLines:

@@ -84,8 +84,7 @@ def parse_alpha_range(spec: str) -> np.ndarray:
     return a + c * np.arange(n)
 
 
-def _point(wing, flight, alpha_deg, area, c_ref, rho, airspeed, support) -> PolarPoint:
-    sol = wing.solve(None, flight, support=support, warm=True)
+def _point(wing, sol, alpha_deg, area, c_ref, rho, airspeed) -> PolarPoint:
     q = 0.5 * rho * airspeed**2
     # pitching moment of the aero forces about r_k around y_k
     r = sol.nodes[wing.mesh.sections]  # (n_sec, m, 3)
@@ -119,20 +118,21 @@ def sweep(wing: AeroelasticWing, airspeed_mps: float, alphas_deg, start_alpha_de
     for branch in order:
         if start_state is not None:
             wing.state = start_state.copy()
-        for k, i in enumerate(branch):
+        for i in branch:
             a = alphas[i]
             flight = FlightState.wind_tunnel(airspeed_mps, np.deg2rad(a))
             try:
                 try:
-                    if start_state is None:
-                        wing.solve(None, flight, support=support, warm=False)
-                    points[i] = _point(wing, flight, a, area, c_ref, rho, airspeed_mps, support)
+                    sol = wing.solve(None, flight, support=support, warm=start_state is not None)
+                    points[i] = _point(wing, sol, a, area, c_ref, rho, airspeed_mps)
                 except WingConvergenceError:
+                    if start_state is None:  # that was already a cold start
+                        raise
                     # second attempt: cold start with the dynamic-pressure ramp from the unloaded wing
                     good = wing.state.copy()
                     try:
-                        wing.solve(None, flight, support=support, warm=False)
-                        points[i] = _point(wing, flight, a, area, c_ref, rho, airspeed_mps, support)
+                        sol = wing.solve(None, flight, support=support, warm=False)
+                        points[i] = _point(wing, sol, a, area, c_ref, rho, airspeed_mps)
                     except WingConvergenceError:
                         wing.state = good
                         raise

@@ -91,24 +91,11 @@ class StaticSolver:
         Largest translation increment per iteration (None: unlimited).
     mode : "full" | "modified"
         Refactor every iteration, or keep a factorisation while the residual falls by ``contraction`` per step.
-    clip_rotations_per_node : bool
-        Shorten only the nodal spins beyond ``max_rot_rad`` instead of scaling the whole increment.
-    ptc : float
-        Pseudo-transient continuation: factor of the diagonal shift ``ptc |r|/|r_0| |diag K|`` added to the
-        tangent (0: plain Newton). Robust for the slack/wrinkled canopy; the converged solution is unchanged.
-    line_search : bool
-        Crisfield's line search on the directional derivative ``g(s) = du . r(s)`` (Crisfield 1991, Vol. 1,
-        Sect. 9.3): a full step is kept when ``|g(1)| <= 0.8 |g(0)|``, otherwise up to three regula-falsi steps
-        look for ``g = 0``. The trial assembly is reused by the next iteration.
-    max_backtracks : int
-        A Newton step that increases the residual norm is halved up to this many times (0: plain Newton).
     """
 
     def __init__(self, assembler: Assembler, tol_force: float = 1e-8, tol_disp: float = 1e-8,
                  force_floor: float = 1e-6, max_iter: int = 40, max_rot_rad: float = 0.5,
-                 max_step_m: float | None = None, mode: str = "full", contraction: float = 0.25,
-                 max_backtracks: int = 0, clip_rotations_per_node: bool = False, ptc: float = 0.0,
-                 line_search: bool = False):
+                 max_step_m: float | None = None, mode: str = "full", contraction: float = 0.25):
         if mode not in ("full", "modified"):
             raise ValueError(f"mode must be 'full' or 'modified', got {mode!r}")
         self.asm = assembler
@@ -120,10 +107,6 @@ class StaticSolver:
         self.max_step_m = max_step_m
         self.mode = mode
         self.contraction = contraction
-        self.max_backtracks = max_backtracks
-        self.clip_rotations_per_node = clip_rotations_per_node
-        self.ptc = ptc
-        self.line_search = line_search
         self._sel_cache: dict = {}
         self._lu = None
         self._lu_key = None
@@ -188,16 +171,12 @@ class StaticSolver:
         st = state.updated(du0) if np.any(du0) else state.copy()
         history = []
         nfac = 0
-        st_prev, du_last, n_back = None, None, 0
-        r0_ptc = None
         r_prev = np.inf
         work_first, work_last = 0.0, np.inf  # |r . du| of the first and of the last Newton correction
         f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
-        cached = None  # (f_int, K) of the current state, from the line search
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         for it in range(1, max_iter + 1):
-            f_int, K = cached if cached is not None else self.asm.assemble(st.x, st.Rn, tangent=True)
-            cached = None
+            f_int, K = self.asm.assemble(st.x, st.Rn, tangent=True)
             r = f_ext - f_int
             rf = r[free]
             rnorm = float(np.linalg.norm(rf))
@@ -219,28 +198,10 @@ class StaticSolver:
                             and (last_du <= self.tol_disp or rnorm <= 1e-3 * self.tol_force * scale)):
                 history.append((it, rnorm, 0.0))
                 return StaticResult(st, -r, it - 1, history, True, nfac)
-            # backtracking: a step that increased the residual is halved (at most max_backtracks times); the
-            # assembly of the trial state is reused as the next iteration's, so a backtrack costs one assembly
-            if st_prev is not None and rnorm > r_prev and n_back < self.max_backtracks:
-                n_back += 1
-                du_last *= 0.5
-                st = st_prev.updated(du_last)
-                history.append((it, rnorm, float(np.max(np.abs(du_last.reshape(-1, DOF_PER_NODE)[:, :3])))))
-                continue
-            n_back = 0
             refactor = (self.mode == "full" or self._lu is None or self._lu_key != key
                         or rnorm > self.contraction * r_prev)
             if refactor:
                 Kff = sp.csc_matrix((K.data[sel], ind, ptr), shape=(free.size, free.size))
-                if self.ptc > 0.0:
-                    # pseudo-transient continuation (Kelley & Keyes 1998, "switched evolution relaxation"): a
-                    # diagonal shift proportional to the relative residual; it vanishes at convergence, so the
-                    # solution is unchanged, and it keeps the steps short while slack/wrinkled canopy switches state
-                    if it == 1 or r0_ptc is None:
-                        r0_ptc = max(rnorm, 1e-300)
-                    dk = np.abs(Kff.diagonal())
-                    shift = self.ptc * min(rnorm / r0_ptc, 1.0)
-                    Kff = Kff + sp.diags(shift * np.maximum(dk, 1e-12 * dk.max()), format="csc")
                 try:
                     self._lu = spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
                 except RuntimeError as exc:  # singular matrix
@@ -259,15 +220,9 @@ class StaticSolver:
             du[free] = duf
             d6 = du.reshape(-1, DOF_PER_NODE)
             fac = 1.0
-            rot_n = np.linalg.norm(d6[:, 3:], axis=1)
-            big = rot_n > self.max_rot_rad
-            if np.any(big):
-                if self.clip_rotations_per_node:
-                    # only the offending nodal spins are shortened: a node of the very thin canopy whose rotation
-                    # is barely restrained must not stall the translations of the whole structure
-                    d6[big, 3:] *= (self.max_rot_rad / rot_n[big])[:, None]
-                else:
-                    fac = self.max_rot_rad / float(np.max(rot_n))
+            rot = float(np.max(np.linalg.norm(d6[:, 3:], axis=1))) if d6.size else 0.0
+            if rot > self.max_rot_rad:
+                fac = self.max_rot_rad / rot
             if self.max_step_m is not None:
                 tr = float(np.max(np.linalg.norm(d6[:, :3], axis=1)))
                 if tr * fac > self.max_step_m:
@@ -276,34 +231,11 @@ class StaticSolver:
             dnorm = float(np.max(np.abs(d6[:, :3]))) if d6.size else 0.0
             history.append((it, rnorm, dnorm))
             r_prev = rnorm
-            st_prev, du_last = st, du
-            if self.line_search:
-                st, cached = self._line_search(st, du, rf, free, f_ext)
-            else:
-                st = st.updated(du)
-        f_int, _ = cached if cached is not None else self.asm.assemble(st.x, st.Rn, tangent=False)
+            st = st.updated(du)
+        f_int, _ = self.asm.assemble(st.x, st.Rn, tangent=False)
         r = f_ext - f_int
         history.append((max_iter + 1, float(np.linalg.norm(r[free])), np.nan))
         if allow_partial and np.all(np.isfinite(r)):
             return StaticResult(st, -r, max_iter, history, False, nfac)
         raise ConvergenceError(f"Newton did not converge in {max_iter} iterations", history)
 
-    def _line_search(self, st: NodalState, du: np.ndarray, rf0: np.ndarray, free: np.ndarray, f_ext: np.ndarray):
-        """Step length along ``du`` (see ``line_search``); returns the new state and its ``(f_int, K)``."""
-        g0 = float(du[free] @ rf0)
-        s_lo, g_lo = 0.0, g0
-        step = 1.0
-        best = None
-        for _ in range(4):
-            trial = st.updated(step * du)
-            f_int, K = self.asm.assemble(trial.x, trial.Rn, tangent=True)
-            g = float(du[free] @ (f_ext - f_int)[free])
-            if best is None or abs(g) < best[0]:
-                best = (abs(g), trial, (f_int, K))
-            if not np.isfinite(g) or abs(g) <= 0.8 * abs(g0) or g0 <= 0.0:
-                break
-            # regula falsi between the last two points on the sign-changing or extrapolated secant
-            s_new = step - g * (step - s_lo) / (g - g_lo) if g != g_lo else 0.5 * step
-            s_lo, g_lo = step, g
-            step = float(np.clip(s_new, 0.1, 1.0))
-        return best[1], best[2]
