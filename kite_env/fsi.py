@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kite_env.aero.loads import section_loads, wing_totals
+from kite_env.aero.loads import load_jacobian, section_loads, wing_totals
 from kite_env.config import Config
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteMesh
-from kite_env.structure import tube
+from kite_env.structure import rotations, tube
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
 from kite_env.structure.shell import ShellSet
@@ -48,7 +48,10 @@ class WingConvergenceError(RuntimeError):
     def __init__(self, message: str, history: list[dict]):
         lines = [message, "coupling history (iter, max|dx| [m], rel. load change, newton iters):"]
         for h in history[-12:]:
-            lines.append(f"  {h['iter']:3d}  {h['dx_max_m']:.3e}  {h['dload_rel']:.3e}  {h['newton_iters']}")
+            if "iter" in h:
+                lines.append(f"  {h['iter']:3d}  {h['dx_max_m']:.3e}  {h['dload_rel']:.3e}  {h['newton_iters']}")
+            elif "retry" in h:
+                lines.append(f"  retry {h['retry']} with {h['n_sub']} bridle sub-steps")
         super().__init__("\n".join(lines))
         self.history = history
 
@@ -148,10 +151,22 @@ class AeroelasticWing:
         self.solver = StaticSolver(self.assembler)
         self.lines = BridleLines(mesh.bridle)
         self._lines_solver = StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines]))
+        # monolithic Newton on structure + aero loads: the pattern includes the section blocks of the aero load
+        # Jacobian; mode "modified" keeps the factorisation across calls (time steps) while it still contracts
+        self._mono_solvers = {
+            "prescribed": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells], extra_blocks=mesh.sections),
+                                       mode="modified", max_iter=self.cfg.fsi.max_newton_iter),
+            "lines": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines],
+                                            extra_blocks=mesh.sections), mode="modified",
+                                  max_iter=self.cfg.fsi.max_newton_iter),
+        }
         self.bridle = np.asarray(mesh.bridle)
         self.n_dof = 6 * mesh.n_nodes
+        # translational DOF of the section load points, in the order of SectionLoads.nodal_forces.ravel()
+        self._load_dofs = (6 * mesh.sections[:, :, None] + np.arange(3)).ravel()
         self.state = self.unloaded_state()
         self._sec_prev: np.ndarray | None = None  # section node positions at the previous time step (Eq. 3)
+        self._step_prev: tuple | None = None  # (state, dt) before the last committed time step (predictor)
         # kite control unit for support="lines": below the tip mid-chord, power-line length from the paper (Table 1)
         self.line_length_m = 25.0
 
@@ -164,6 +179,21 @@ class AeroelasticWing:
         """Forget the warm-start state (next solve starts from the unloaded wing)."""
         self.state = self.unloaded_state()
         self._sec_prev = None
+        self._step_prev = None
+
+    def _predict(self, dt: float | None) -> NodalState:
+        """Start of a warm time step: the last solution, linearly extrapolated in time when the two previous
+        committed solves were time steps (``fsi.extrapolate``). Positions ``x + r (x - x_prev)``, rotations
+        ``expm(r log(R R_prev^T)) R`` with ``r = dt / dt_prev`` (at most 2). Only the start of Newton changes."""
+        prev = self._step_prev
+        if not dt or prev is None or prev[1] is None:
+            return self.state.copy()
+        st_prev, dt_prev = prev
+        r = min(dt / dt_prev, 2.0)
+        x = self.state.x + r * (self.state.x - st_prev.x)
+        D = np.einsum("nij,nkj->nik", self.state.Rn, st_prev.Rn)
+        Rn = np.einsum("nij,njk->nik", rotations.expm(r * rotations.logm(D)), self.state.Rn)
+        return NodalState(x, Rn)
 
     @property
     def design_bridle(self) -> np.ndarray:
@@ -184,8 +214,8 @@ class AeroelasticWing:
 
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
-        loc = self.beams.local_deformation(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
-        th1, th2, L = loc["theta1"][tb], loc["theta2"][tb], loc["length"][tb][:, None]
+        l, th = self.beams.local_rotations(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
+        th1, th2, L = th[tb, 0], th[tb, 1], l[tb][:, None]
         # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs the secant
         kappa = np.maximum(np.linalg.norm(-(4 * th1[:, 1:] + 2 * th2[:, 1:]) / L, axis=1),
                            np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L, axis=1))
@@ -208,13 +238,11 @@ class AeroelasticWing:
         )
 
     def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
-        f = np.zeros((self.mesh.n_nodes, 6))
-        np.add.at(f[:, :3], self.mesh.sections.ravel(), scale * loads.nodal_forces.reshape(-1, 3))
-        return f.ravel()
+        return np.bincount(self._load_dofs, weights=scale * loads.nodal_forces.ravel(), minlength=self.n_dof)
 
     # ------------------------------------------------------------------ main entry
     def solve(self, q_b: np.ndarray | None, flight: FlightState, dt: float | None = None, support: str = "prescribed",
-              warm: bool = True, commit: bool = True) -> WingSolution:
+              warm: bool = True, commit: bool = True, method: str = "monolithic") -> WingSolution:
         """Static aeroelastic equilibrium for bridle points ``q_b`` (4, 3) [m] in K (None: design positions).
 
         ``dt`` [s] enables the deformation velocity of Eq. (3) relative to the previous committed solution.
@@ -223,12 +251,15 @@ class AeroelasticWing:
         """
         if support not in ("prescribed", "lines"):
             raise ValueError(f"support must be 'prescribed' or 'lines', got {support!r}")
+        if method not in ("monolithic", "staggered"):
+            raise ValueError(f"method must be 'monolithic' or 'staggered', got {method!r}")
         q_b = self.design_bridle if q_b is None else np.asarray(q_b, dtype=float).reshape(4, 3)
         if not np.all(np.isfinite(q_b)):
             raise ValueError("bridle positions q_b contain non-finite values")
         t0 = time.perf_counter()
+        predicted = warm and self.state is not None and self.cfg.fsi.extrapolate and self._step_prev is not None
         if warm and self.state is not None:
-            state = self.state.copy()
+            state = self._predict(dt) if predicted else self.state.copy()
             ramp = [1.0]
         else:
             state = self.unloaded_state()
@@ -244,17 +275,105 @@ class AeroelasticWing:
         if support == "lines":
             move = float(np.max(np.abs((q_b - q_start)[:, [0, 2]])))
         n_sub = max(1, int(np.ceil(move / self.cfg.fsi.max_bridle_step_m)))
+        step = self._monolithic if method == "monolithic" else self._couple
         for scale in ramp[:-1]:
-            state, sol = self._couple(state, q_b, flight, dt, support, scale, history)
-        for k in range(1, n_sub + 1):
-            q_k = q_start + (q_b - q_start) * (k / n_sub)
-            state, sol = self._couple(state, q_k, flight, dt, support, ramp[-1], history)
+            state, sol = step(state, q_b, flight, dt, support, scale, history)
+        start = state
+        for attempt in range(self.cfg.fsi.max_retries + 1):
+            # a failed solve is retried from the last solution (not the predicted start) with a fresh factorisation,
+            # then from there with twice as many bridle sub-steps per further retry
+            try:
+                state = start
+                for k in range(1, n_sub + 1):
+                    q_k = q_start + (q_b - q_start) * (k / n_sub)
+                    state, sol = step(state, q_k, flight, dt, support, ramp[-1], history)
+                break
+            except WingConvergenceError:
+                if attempt == self.cfg.fsi.max_retries:
+                    raise
+                for solver in self._mono_solvers.values():
+                    solver.forget_factorization()
+                if predicted:
+                    predicted = False
+                    start = self.state.copy()
+                else:
+                    n_sub *= 2
+                history.append({"retry": attempt + 1, "n_sub": n_sub})
         sol.history = history
         if commit:
+            # time stepping (dt given, warm): remember the previous step for the linear predictor
+            self._step_prev = (self.state, dt) if (dt and warm) else None
             self.state = state
             self._sec_prev = state.x[self.mesh.sections].copy()
         sol.history.append({"wall_s": time.perf_counter() - t0})
         return sol
+
+    def _monolithic(self, state, q_b, flight, dt, support, scale, history):
+        """Newton on the coupled residual ``F_a(x) - f_int(x) = 0`` with the aero load Jacobian in the tangent.
+
+        With ``support="lines"`` the bridle-line tensions are held fixed in a Newton solve and updated from the
+        reactions between solves, until they change by less than ``fsi.tol_force_rel``.
+        """
+        fcfg = self.cfg.fsi
+        b = self.bridle
+        solver = self._mono_solvers[support]
+        if support == "prescribed":
+            fixed = (6 * b[:, None] + np.arange(3)[None, :]).ravel()
+            du_fixed = (q_b - state.x[b]).ravel()
+            n_outer = 1
+        else:
+            fixed = (6 * b[:, None] + np.array([0, 2])[None, :]).ravel()
+            du_fixed = (q_b - state.x[b])[:, [0, 2]].ravel()
+            self.lines.anchor[:] = self.kcu_position()
+            n_outer = fcfg.max_coupling_iter
+        load = _AeroLoad(self, solver.asm, flight, dt, scale)
+        if support == "lines" and not history:
+            # first guess of the line tensions: the aerodynamic force shared by the four lines
+            f0 = load.force(state).reshape(-1, 6)[:, :3].sum(axis=0)
+            self.lines.tension[:] = max(float(np.linalg.norm(f0)) / 4.0, 1.0)
+        for outer in range(1, n_outer + 1):
+            try:
+                res = solver.solve(state, None, fixed, du_fixed, load=load, tol_force=fcfg.tol_force_rel,
+                                   tol_disp=fcfg.tol_disp_m)
+            except ConvergenceError as exc:
+                history.append({"iter": len(history) + 1, "dx_max_m": np.nan, "dload_rel": np.nan,
+                                "newton_iters": len(exc.history), "residual_history": exc.history})
+                raise WingConvergenceError(f"monolithic aeroelastic Newton solve failed: {exc}", history) from exc
+            state = res.state
+            du_fixed = np.zeros_like(du_fixed)
+            f_ext = load.f_ext  # aero loads at the returned state (the solver's last iteration)
+            fi_b = (res.reactions + f_ext).reshape(-1, 6)[b, :3]  # wing + line internal force at A-D
+            entry = {"iter": len(history) + 1, "dx_max_m": res.history[-2][2] if len(res.history) > 1 else 0.0,
+                     "dload_rel": 0.0, "newton_iters": res.iterations, "scale": scale, "method": "monolithic",
+                     "residual_N": res.history[-1][1], "factorizations": res.factorizations,
+                     "jacobians": load.n_tangent}
+            history.append(entry)
+            if support == "prescribed":
+                break
+            fi_b = fi_b - self.lines.internal(state.x[b][:, None, :], None)[0][:, :3]
+            F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]
+            e_in = self.lines.anchor - state.x[b]
+            e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
+            T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
+            entry["dT_rel"] = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
+            self.lines.tension[:] = T_new
+            if entry["dT_rel"] < fcfg.tol_force_rel:
+                break
+        else:
+            raise WingConvergenceError(
+                f"bridle-line tensions did not converge in {n_outer} monolithic solves "
+                f"(tol_force_rel={fcfg.tol_force_rel})", history)
+        loads = load.loads
+        F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]  # F_b = F_i^b - F_a^b (Eq. 1, second block)
+        tot = wing_totals(loads, flight.v_kite - flight.v_wind)
+        sol = WingSolution(
+            F_b=F_b, nodes=state.x.copy(), alpha=loads.alpha, CL=loads.CL, CD=loads.CD, CM=loads.CM,
+            aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
+            coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=sum(
+                h.get("newton_iters", 0) for h in history if "iter" in h),
+            tube_collapsed=load.collapsed, section_forces=scale * loads.nodal_forces,
+        )
+        return state, sol
 
     def _couple(self, state, q_b, flight, dt, support, scale, history):
         fcfg = self.cfg.fsi
@@ -378,3 +497,39 @@ class BridleLines:
         K = np.zeros((n, 6, 6))
         K[:, :3, :3] = (self.tension / l)[:, None, None] * (np.eye(3) - e[:, :, None] * e[:, None, :])
         return f, K
+
+
+class _AeroLoad:
+    """Aerodynamic loads as a function of the iterate, for the monolithic Newton solve (``StaticSolver(load=...)``).
+
+    ``force`` updates the inflated-tube secant stiffness and returns the nodal aero load vector (Eq. 2-9);
+    ``tangent`` returns ``-d F_a / d x`` (section blocks, :func:`kite_env.aero.loads.load_jacobian`) on the
+    assembler's pattern.
+    """
+
+    def __init__(self, wing: "AeroelasticWing", asm: Assembler, flight: FlightState, dt: float | None,
+                 scale: float):
+        self.wing, self.asm, self.flight, self.dt, self.scale = wing, asm, flight, dt, scale
+        self.f_ext = None
+        # factorisations of the coupled tangent are reused across calls of the same kind only: static or time step
+        # (the deformation-velocity term scales with 1/dt; dt in 25 % buckets) and load scale
+        self.tangent_key = (round(scale, 6), None if not dt else int(round(np.log(dt) / np.log(1.25))))
+        self.loads = None
+        self.collapsed = None
+        self.n_force = 0
+        self.n_tangent = 0
+
+    def force(self, state: NodalState) -> np.ndarray:
+        self.collapsed = self.wing._update_tube_stiffness(state)
+        self.loads = self.wing._aero(state, self.flight, self.dt)
+        self.n_force += 1
+        self.f_ext = self.wing._load_vector(self.loads, self.scale)
+        return self.f_ext
+
+    def tangent(self, state: NodalState) -> np.ndarray:
+        w, fl = self.wing, self.flight
+        _, J = load_jacobian(
+            state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
+            w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt)
+        self.n_tangent += 1
+        return self.asm.block_data(-self.scale * J)

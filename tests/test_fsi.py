@@ -84,6 +84,45 @@ def test_steering_line_twists_the_wing(nominal):
     assert f_right > f_left
 
 
+def test_monolithic_and_staggered_couplings_reach_the_same_equilibrium(nominal):
+    """Two different algorithms (Newton on the coupled residual; Aitken-relaxed alternation of Fig. 2) for the same
+    equations: the same shape and bridle forces, up to the coupling tolerances."""
+    wing, _, sol, state = nominal
+    flight = FlightState.wind_tunnel(AIRSPEED, np.deg2rad(19.0))
+    q = sol.nodes[wing.bridle]
+    out = {}
+    for method in ("monolithic", "staggered"):
+        wing.state = state.copy()
+        out[method] = wing.solve(q, flight, support="prescribed", warm=True, commit=False, method=method)
+    a, b = out["monolithic"], out["staggered"]
+    assert np.abs(a.nodes - sol.nodes).max() > 0.02  # a real change of the shape from the 16 deg state
+    np.testing.assert_allclose(a.nodes, b.nodes, atol=10 * wing.cfg.fsi.tol_disp_m)
+    np.testing.assert_allclose(a.F_b, b.F_b, atol=5e-3 * np.abs(a.F_b).max())
+    assert a.newton_iters < b.newton_iters  # the point of the monolithic solve
+
+
+def test_time_steps_relax_to_the_static_equilibrium(nominal):
+    """Eq. (3): with a time step the deformation velocity loads the wing (aerodynamic damping), so a sudden
+    steering input is followed gradually; held constant, the wing settles on the static solution."""
+    wing, flight, sol, state = nominal
+    q = sol.nodes[wing.bridle].copy()
+    q[1, 2] -= 0.02  # right rear bridle point B pulled 2 cm towards the bridle
+    wing.state = state.copy()
+    static = wing.solve(q, flight, support="prescribed", warm=True, commit=False)
+    wing.state = state.copy()
+    wing.solve(sol.nodes[wing.bridle], flight, support="prescribed", warm=True)  # commit: Eq. 3 reference
+    err0 = np.abs(state.x - static.nodes).max()
+    errs = []
+    for _ in range(40):
+        step = wing.solve(q, flight, dt=0.01, support="prescribed", warm=True)
+        errs.append(np.abs(step.nodes - static.nodes).max())
+    assert err0 > 0.02
+    assert errs[0] > 0.5 * err0  # damped: the first step goes only part of the way
+    assert errs[-1] < 0.05 * err0  # and the wing settles on the static equilibrium
+    assert errs[-1] < errs[20] < errs[5]
+    np.testing.assert_allclose(step.F_b, static.F_b, atol=0.05 * np.abs(static.F_b - sol.F_b).max() + 5.0)
+
+
 def test_non_convergence_raises_with_history():
     cfg = Config()
     import dataclasses
@@ -94,6 +133,14 @@ def test_non_convergence_raises_with_history():
         wing.solve(None, FlightState.wind_tunnel(AIRSPEED, ALPHA_K), support="lines", warm=False)
     assert len(exc.value.history) >= 2
     assert "did not converge" in str(exc.value)
+    # the monolithic Newton solve with too few iterations: the residual history is in the message
+    cfg = dataclasses.replace(cfg, fsi=dataclasses.replace(cfg.fsi, max_newton_iter=2, max_retries=1,
+                                                                  cold_load_steps=1))
+    wing = AeroelasticWing(build_kite("rhino16", n_sections=11, n_chord=4), cfg)
+    with pytest.raises(WingConvergenceError) as exc:
+        wing.solve(None, FlightState.wind_tunnel(AIRSPEED, ALPHA_K), support="prescribed", warm=False)
+    assert "|r| =" in str(exc.value) and "Newton did not converge" in str(exc.value)
+    assert any(h.get("retry") == 1 for h in exc.value.history)  # retried once with finer bridle sub-steps
 
 
 def test_bad_input_rejected():

@@ -49,7 +49,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.aero.breukels import X_REF_OVER_C_DEFAULT, lei_coefficients
-from kite_env.aero.sections import SectionGeometry, apparent_wind, cross, inflow, section_geometry
+from kite_env.aero.kernels import section_loads_fields
+from kite_env.aero.sections import (SectionGeometry, apparent_wind, cross, inflow, section_geometry,
+                                    spanwise_directions)
+from kite_env.structure.kernels import resolve_backend
 
 
 
@@ -163,6 +166,8 @@ def section_loads(
     x_sec_prev: np.ndarray | None = None,
     dt: float | None = None,
     x_ref_over_c: float = X_REF_OVER_C_DEFAULT,
+    spanwise: np.ndarray | None = None,
+    backend: str = "auto",
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -188,13 +193,21 @@ def section_loads(
         Time step for Eq. (3).
     x_ref_over_c : float [-]
         Moment reference point / chord, measured from the airfoil leading edge (front of the LE tube).
+    spanwise : (n_sec, 3) float, optional
+        Spanwise LE-line directions (see :func:`kite_env.aero.sections.section_geometry`); default from ``x_sec``.
+    backend : {"auto", "numba", "numpy"}
+        ``"numpy"``: the reference code below; ``"numba"``: the compiled kernel of :mod:`kite_env.aero.kernels`
+        (same results to round-off); ``"auto"``: see :func:`kite_env.structure.kernels.resolve_backend`.
 
     Returns
     -------
     SectionLoads
     """
+    if resolve_backend(backend) == "numba":
+        return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
+                                                  x_ref_over_c, spanwise))
     x_sec = np.asarray(x_sec, dtype=float)
-    geom = section_geometry(x_sec, tube_d)
+    geom = section_geometry(x_sec, tube_d, spanwise)
     v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt)
     c = geom.chord
     # flow u = -v_a in section components; its e_y component is dropped (projection onto the airfoil plane)
@@ -216,6 +229,58 @@ def section_loads(
         nodal_forces=nodal, alpha=alpha, CL=CL, CD=CD, CM=CM, lift_local=lift_loc, drag_local=drag_loc,
         moment=moment, s_ref=s_ref, v_app=v_a, q_dyn=(0.5 * rho) * speed2, geometry=geom, positions=x_sec,
     )
+
+
+def load_jacobian(
+    x_sec: np.ndarray,
+    tube_d: np.ndarray,
+    width: np.ndarray,
+    v_kite: np.ndarray,
+    omega: np.ndarray,
+    v_wind: np.ndarray,
+    rho: float,
+    x_sec_prev: np.ndarray | None = None,
+    dt: float | None = None,
+    x_ref_over_c: float = X_REF_OVER_C_DEFAULT,
+    h: float = 1e-6,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
+
+    Forward differences of :func:`section_loads` with respect to each of the ``3 m`` node coordinates of a section,
+    all sections perturbed at once and all ``3 m`` perturbations evaluated in a single stacked call. A perturbation
+    changes the section's geometry (Eq. 4-6) and, with ``dt``, its deformation velocity (Eq. 3), whose term
+    ``1 / (2 dt)`` dominates at small time steps. Each section's loads depend on its own nodes only, except through
+    the spanwise LE-line tangent used where a section is nearly flat, which is held at its unperturbed value: the
+    blocks are the exact Jacobian up to that (small) coupling between neighbouring sections and the difference
+    error ``O(h)``.
+
+    Parameters are those of :func:`section_loads`; ``h`` [m] is the difference step.
+
+    Returns
+    -------
+    f0 : (n_sec, m, 3) float [N]
+        Nodal forces at ``x_sec``.
+    J : (n_sec, 3 m, 3 m) float [N/m]
+        ``J[i, 3 a + k, 3 b + l] = d f[i, a, k] / d x[i, b, l]``.
+    """
+    x_sec = np.asarray(x_sec, dtype=float)
+    n_sec, m, _ = x_sec.shape
+    p = 3 * m
+    base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c)
+    tan = spanwise_directions(x_sec[:, 0])
+    # stack: copy q perturbs coordinate q (= 3 b + l) of every section
+    xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
+    q = np.arange(p)
+    xs.reshape(p, n_sec, p)[q, :, q] += h
+    rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (p,) + np.shape(a)).reshape(
+        (p * n_sec,) + np.shape(a)[1:]))
+    v_w = np.asarray(v_wind, dtype=float)
+    pert = section_loads(
+        xs.reshape(p * n_sec, m, 3), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
+        v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
+        None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan))
+    df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
+    return base.nodal_forces, df.transpose(1, 2, 0).copy()
 
 
 def wing_totals(loads: SectionLoads, v_ref: np.ndarray) -> dict:

@@ -145,7 +145,7 @@ def spanwise_directions(r_le: np.ndarray) -> np.ndarray:
     return tan
 
 
-def section_geometry(x_sec: np.ndarray, tube_d: np.ndarray) -> SectionGeometry:
+def section_geometry(x_sec: np.ndarray, tube_d: np.ndarray, spanwise: np.ndarray | None = None) -> SectionGeometry:
     """Section frames, chord, thickness and camber of all sections (Eq. 4-6).
 
     Parameters
@@ -155,6 +155,10 @@ def section_geometry(x_sec: np.ndarray, tube_d: np.ndarray) -> SectionGeometry:
         spanwise order (the mesh orders them from the right tip to the left tip).
     tube_d : (n_sec,) float [m]
         LE tube diameter at each section.
+    spanwise : (n_sec, 3) float [m], optional
+        Spanwise LE-line directions to use instead of :func:`spanwise_directions` of ``x_sec`` (the load Jacobian
+        evaluates perturbed copies of the sections stacked in one array, where neighbours are not spanwise
+        neighbours; it holds the LE-line tangent of the unperturbed wing fixed).
 
     Returns
     -------
@@ -170,7 +174,7 @@ def section_geometry(x_sec: np.ndarray, tube_d: np.ndarray) -> SectionGeometry:
     axes = np.empty((x_sec.shape[0], 3, 3))  # rows e_x, e_y, e_z (contiguous rows)
     e_x, e_y = axes[:, 0], axes[:, 1]
     np.divide(chord_vec, chord_nodes[:, None], out=e_x)
-    tan = spanwise_directions(r_le)
+    tan = spanwise_directions(r_le) if spanwise is None else np.asarray(spanwise, dtype=float)
     tan = tan - dot(tan, e_x)[:, None] * e_x  # orthogonalised against the chord
     tan /= np.sqrt(dot(tan, tan))[:, None]
     # normal of the airfoil plane: chord e_x and the mean offset h of the nodes from the chord line

@@ -172,6 +172,20 @@ class BeamSet:
         theta = logm(Rbar)  # (n, 2, 3)
         return l, r1, r2, r3, q, qn, Rr, theta
 
+    def local_rotations(self, x_e, R_e) -> tuple[np.ndarray, np.ndarray]:
+        """Current chord length ``l`` (n_e,) [m] and local end rotations ``theta`` (n_e, 2, 3) [rad] (element frame;
+        x: twist, y/z: bending), the cheap part of :meth:`local_deformation` (compiled with the numba backend)."""
+        if self.backend == "numba":
+            from .kernels import beam_local_rotations
+
+            n = self.n_elem
+            l, th = np.empty(n), np.empty((n, 2, 3))
+            beam_local_rotations(np.ascontiguousarray(x_e, dtype=float), np.ascontiguousarray(R_e, dtype=float),
+                                 self.R0, l, th)
+            return l, th
+        l, _, _, _, _, _, _, theta = self._frame(x_e, R_e)
+        return l, theta
+
     def local_deformation(self, x_e, R_e) -> dict:
         """Local (co-rotated) deformation measures for a tube law.
 

@@ -186,6 +186,55 @@ def _tinv_coeffs(t2):
 
 
 @njit(**_JIT)
+def beam_local_rotations(x_e, R_e, R0, l_out, th_out):
+    """Chord length and local end rotations of co-rotational beams, as ``BeamSet._frame`` (``l``, ``theta``).
+
+    x_e : (n, 2, 3), R_e : (n, 2, 3, 3), R0 : (n, 3, 3) as :func:`beam_internal`; outputs ``l_out`` (n,) [m] and
+    ``th_out`` (n, 2, 3) [rad] (overwritten). Used for the inflated-tube secant stiffness once per iteration.
+    """
+    n = x_e.shape[0]
+    r1, r2, r3, q, tmp3 = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    qn = np.empty((2, 3))
+    Rr, Rb, tmp = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    for e in range(n):
+        for i in range(3):
+            tmp3[i] = x_e[e, 1, i] - x_e[e, 0, i]
+        l = math.sqrt(tmp3[0] * tmp3[0] + tmp3[1] * tmp3[1] + tmp3[2] * tmp3[2])
+        l_out[e] = l
+        for i in range(3):
+            r1[i] = tmp3[i] / l
+        for k in range(2):
+            for i in range(3):
+                qn[k, i] = R_e[e, k, i, 0] * R0[e, 0, 1] + R_e[e, k, i, 1] * R0[e, 1, 1] + R_e[e, k, i, 2] * R0[e, 2, 1]
+        for i in range(3):
+            q[i] = 0.5 * (qn[0, i] + qn[1, i])
+        tmp3[0], tmp3[1], tmp3[2] = _cross(r1[0], r1[1], r1[2], q[0], q[1], q[2])
+        nn3 = math.sqrt(tmp3[0] * tmp3[0] + tmp3[1] * tmp3[1] + tmp3[2] * tmp3[2])
+        for i in range(3):
+            r3[i] = tmp3[i] / nn3
+        r2[0], r2[1], r2[2] = _cross(r3[0], r3[1], r3[2], r1[0], r1[1], r1[2])
+        for i in range(3):
+            Rr[i, 0], Rr[i, 1], Rr[i, 2] = r1[i], r2[i], r3[i]
+        for k in range(2):
+            for i in range(3):
+                for j in range(3):
+                    tmp[i, j] = R_e[e, k, i, 0] * R0[e, 0, j] + R_e[e, k, i, 1] * R0[e, 1, j] \
+                        + R_e[e, k, i, 2] * R0[e, 2, j]
+            for i in range(3):
+                for j in range(3):
+                    Rb[i, j] = Rr[0, i] * tmp[0, j] + Rr[1, i] * tmp[1, j] + Rr[2, i] * tmp[2, j]
+            th_out[e, k, 0], th_out[e, k, 1], th_out[e, k, 2] = _quat_logm(
+                Rb[0, 0], Rb[0, 1], Rb[0, 2], Rb[1, 0], Rb[1, 1], Rb[1, 2], Rb[2, 0], Rb[2, 1], Rb[2, 2])
+
+
+@njit(**_JIT)
+def scatter_add(out, index, values):
+    """``out[index[i]] += values[i]`` for all i (unbuffered, like ``np.add.at``; ``out`` is not cleared)."""
+    for i in range(index.shape[0]):
+        out[index[i]] += values[i]
+
+
+@njit(**_JIT)
 def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out):
     """Co-rotational Euler-Bernoulli beams, as :meth:`kite_env.structure.beam.BeamSet.internal`.
 

@@ -110,6 +110,7 @@ class StaticSolver:
         self._sel_cache: dict = {}
         self._lu = None
         self._lu_key = None
+        self._diag_max = 0.0  # largest |K_ii| of the last assembled tangent (round-off floor of the residual)
         self.auto_fixed = np.flatnonzero(np.repeat(~assembler._node_used, DOF_PER_NODE))
 
     def _reduced(self, fixed: np.ndarray):
@@ -129,8 +130,9 @@ class StaticSolver:
         self._lu = None
         self._lu_key = None
 
-    def solve(self, state: NodalState, f_ext: np.ndarray, fixed_dofs=(), du_fixed=None, max_iter: int | None = None,
-              allow_partial: bool = False) -> StaticResult:
+    def solve(self, state: NodalState, f_ext: np.ndarray | None, fixed_dofs=(), du_fixed=None,
+              max_iter: int | None = None, allow_partial: bool = False, load=None, tol_force: float | None = None,
+              tol_disp: float | None = None) -> StaticResult:
         """Equilibrium from the start ``state`` with loads ``f_ext`` held fixed.
 
         Parameters
@@ -148,17 +150,28 @@ class StaticSolver:
         allow_partial : bool
             Return the last (finite) iterate with ``converged=False`` instead of raising when the limit is reached;
             used by the aeroelastic coupling, which updates the loads between a few Newton steps.
+        load : object, optional
+            Configuration-dependent loads (then ``f_ext`` is ignored and may be None): ``load.force(state)`` returns
+            the load vector (n_dof,) at an iterate and is called once per iteration before the assembly (it may also
+            update state-dependent element properties); ``load.tangent(state)`` returns the pattern data (length
+            ``nnz``, see :meth:`Assembler.block_data`) of ``-d f_ext / d x``, added to the tangent whenever it is
+            factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically.
+        tol_force, tol_disp : float, optional
+            Override the solver's tolerances for this call.
 
         Returns
         -------
         StaticResult
         """
         n = self.asm.n_dof
-        f_ext = np.asarray(f_ext, dtype=float)
-        if f_ext.shape != (n,):
-            raise ValueError(f"f_ext must have shape ({n},), got {f_ext.shape}")
-        if not np.all(np.isfinite(f_ext)):
-            raise ValueError("f_ext contains non-finite values")
+        tol_force = self.tol_force if tol_force is None else float(tol_force)
+        tol_disp = self.tol_disp if tol_disp is None else float(tol_disp)
+        if load is None:
+            f_ext = np.asarray(f_ext, dtype=float)
+            if f_ext.shape != (n,):
+                raise ValueError(f"f_ext must have shape ({n},), got {f_ext.shape}")
+            if not np.all(np.isfinite(f_ext)):
+                raise ValueError("f_ext contains non-finite values")
         fixed_in = np.asarray(fixed_dofs, dtype=np.int64).ravel()
         fixed = np.union1d(fixed_in, self.auto_fixed)
         free, sel, ind, ptr, key = self._reduced(fixed)
@@ -173,10 +186,23 @@ class StaticSolver:
         nfac = 0
         r_prev = np.inf
         work_first, work_last = 0.0, np.inf  # |r . du| of the first and of the last Newton correction
-        f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
+        if load is None:
+            f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
         max_iter = self.max_iter if max_iter is None else int(max_iter)
+        # a factorisation is reused only for the same prescribed DOF and the same kind of load tangent
+        lu_key = (key, getattr(load, "tangent_key", None))
+        force_K = False  # refactor at this iterate (a step with a reused factorisation was rejected)
+        stale_step = False  # the last step was made with a factorisation from an earlier iterate
+        prev_st = st
         for it in range(1, max_iter + 1):
-            f_int, K = self.asm.assemble(st.x, st.Rn, tangent=True)
+            if load is not None:
+                f_ext = np.asarray(load.force(st), dtype=float)
+                f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
+            # the tangent is assembled only when it will be factorised (modified Newton reuses the last LU)
+            want_K = self.mode == "full" or self._lu is None or self._lu_key != lu_key or force_K
+            f_int, kdata = self.asm.assemble_data(st.x, st.Rn, tangent=want_K)
+            if kdata is not None:
+                self._diag_max = float(np.max(np.abs(kdata[self.asm.diag_index])))
             r = f_ext - f_int
             rf = r[free]
             rnorm = float(np.linalg.norm(rf))
@@ -190,25 +216,35 @@ class StaticSolver:
             # converged once the last correction is negligible in the energy norm (|r . du| relative to the first
             # iteration's) or the residual has stopped falling (less than halved: Newton is stirring round-off).
             if it == 1:  # from the start state only, so that a diverging iterate cannot inflate it
-                floor = _ROUNDOFF * np.finfo(float).eps * float(np.max(np.abs(K.diagonal()))) \
+                floor = _ROUNDOFF * np.finfo(float).eps * self._diag_max \
                     * max(float(np.max(np.abs(st.x))), 1.0)
             at_floor = it >= 2 and rnorm <= floor and (work_last <= _WORK_TOL * work_first or rnorm > 0.5 * r_prev)
             last_du = history[-1][2] if history else np.inf
-            if at_floor or (rnorm <= self.tol_force * scale
-                            and (last_du <= self.tol_disp or rnorm <= 1e-3 * self.tol_force * scale)):
+            if at_floor or (rnorm <= tol_force * scale
+                            and (last_du <= tol_disp or rnorm <= 1e-3 * tol_force * scale)):
                 history.append((it, rnorm, 0.0))
                 return StaticResult(st, -r, it - 1, history, True, nfac)
-            refactor = (self.mode == "full" or self._lu is None or self._lu_key != key
-                        or rnorm > self.contraction * r_prev)
+            if stale_step and rnorm > r_prev:
+                # the step with the old factorisation made things worse: go back and refactor there
+                history.append((it, rnorm, np.nan))
+                st, force_K, stale_step = prev_st, True, False
+                continue
+            refactor = want_K or rnorm > self.contraction * r_prev
+            force_K = False
             if refactor:
-                Kff = sp.csc_matrix((K.data[sel], ind, ptr), shape=(free.size, free.size))
+                if kdata is None:
+                    _, kdata = self.asm.assemble_data(st.x, st.Rn, tangent=True)
+                    self._diag_max = float(np.max(np.abs(kdata[self.asm.diag_index])))
+                data = kdata if load is None else kdata + load.tangent(st)
+                Kff = sp.csc_matrix((data[sel], ind, ptr), shape=(free.size, free.size))
                 try:
                     self._lu = spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
                 except RuntimeError as exc:  # singular matrix
                     history.append((it, rnorm, np.nan))
                     raise ConvergenceError(f"tangent factorisation failed: {exc}", history) from exc
-                self._lu_key = key
+                self._lu_key = lu_key
                 nfac += 1
+            stale_step = not refactor
             duf = self._lu.solve(rf)
             if not np.all(np.isfinite(duf)):
                 history.append((it, rnorm, np.nan))
@@ -231,7 +267,10 @@ class StaticSolver:
             dnorm = float(np.max(np.abs(d6[:, :3]))) if d6.size else 0.0
             history.append((it, rnorm, dnorm))
             r_prev = rnorm
+            prev_st = st
             st = st.updated(du)
+        if load is not None:
+            f_ext = np.asarray(load.force(st), dtype=float)
         f_int, _ = self.asm.assemble(st.x, st.Rn, tangent=False)
         r = f_ext - f_int
         history.append((max_iter + 1, float(np.linalg.norm(r[free])), np.nan))

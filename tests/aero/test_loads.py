@@ -227,3 +227,30 @@ def test_wing_totals_flat_wing_matches_section_sums_and_symmetry():
     assert abs(tot["force"][1]) < 1e-12 * f
     assert np.all(np.abs(tot["moment"][[0, 2]]) < 1e-12 * f)
     assert tot["force"][2] > 0 and tot["lift_to_drag"] > 1.0
+
+
+@pytest.mark.parametrize("with_dt", [False, True])
+def test_load_jacobian_matches_central_differences(with_dt):
+    """Section blocks of d(nodal forces)/d(node positions), against central differences of section_loads on one
+    section at a time (the spanwise LE tangent then moves with the perturbation, as it does in the wing)."""
+    from kite_env.aero.loads import load_jacobian
+
+    x, d, w = c_wing(n_sec=9, m=5, seed=3, noise=0.01)
+    prev = x - 0.002 * np.random.default_rng(4).normal(size=x.shape) if with_dt else None
+    dt = 5.3e-3 if with_dt else None
+    args = (d, w, np.array([1.0, -2.0, 0.5]), np.array([0.1, 0.2, -0.3]), flow(25.0, 10.0, 5.0), RHO, prev, dt)
+    f0, J = load_jacobian(x, *args)
+    np.testing.assert_allclose(f0, section_loads(x, *args).nodal_forces, rtol=0, atol=1e-12)
+    h = 1e-6
+    for i in (0, 4, 8):
+        Jc = np.zeros((15, 15))
+        for q in range(15):
+            xp, xm = x.copy(), x.copy()
+            xp[i].reshape(-1)[q] += h
+            xm[i].reshape(-1)[q] -= h
+            Jc[:, q] = (section_loads(xp, *args).nodal_forces[i] - section_loads(xm, *args).nodal_forces[i]).ravel()
+        Jc /= 2 * h
+        scale = np.abs(Jc).max()
+        assert np.abs(J[i] - Jc).max() < 1e-3 * scale
+        if with_dt:  # the deformation-velocity term 1/(2 dt) of Eq. (3) is a large part of the block
+            assert np.abs(J[i] - load_jacobian(x, *args[:6])[1][i]).max() > 0.2 * scale

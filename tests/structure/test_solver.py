@@ -164,3 +164,48 @@ def test_stiff_members_converge_at_round_off_floor():
     assert res.history[-1][1] > 1e-8  # only the round-off criterion can have accepted this residual
     # elastica PL^2/EI = 1: tip deflection 0.30172 L (Bisshopp & Drucker 1945); 32 elements: error ~1e-5
     assert -(res.state.x[-1, 2]) == pytest.approx(0.30172, abs=5e-5)
+
+
+class _TipSpringLoad:
+    """Displacement-dependent tip load f_x = P - k (x_tip - x_tip0): a load with a stiffness of its own."""
+
+    def __init__(self, asm, tip, P, k, x0, with_tangent=True):
+        self.asm, self.tip, self.P, self.k, self.x0, self.with_tangent = asm, tip, P, k, x0, with_tangent
+        self.calls = 0
+
+    def force(self, st):
+        self.calls += 1
+        f = np.zeros(self.asm.n_dof)
+        f[6 * self.tip] = self.P - self.k * (st.x[self.tip, 0] - self.x0)
+        return f
+
+    def tangent(self, st):
+        block = np.zeros((1, 3, 3))
+        block[0, 0, 0] = self.k if self.with_tangent else 0.0  # -d f_x / d x_tip
+        return self.asm.block_data(block)
+
+
+def test_configuration_dependent_load_with_its_tangent():
+    n, L, EA = 6, 1.0, 1e4
+    X0 = np.zeros((n + 1, 3))
+    X0[:, 0] = np.linspace(0.0, L, n + 1)
+    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
+    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+    # the extra block is part of the pattern and block_data puts its entries at (6 n + a, 6 n + b)
+    dense = asm.matrix(asm.block_data(np.arange(9.0).reshape(1, 3, 3))).toarray()
+    assert np.array_equal(dense[6 * n:6 * n + 3, 6 * n:6 * n + 3], np.arange(9.0).reshape(3, 3))
+    assert np.count_nonzero(dense) == 8
+    P, k = 50.0, 3.0 * EA / L  # load spring three times stiffer than the bar: plain load iteration diverges
+    clamp = np.arange(6)
+    load = _TipSpringLoad(asm, n, P, k, L)
+    res = StaticSolver(asm).solve(NodalState.reference(X0), None, fixed_dofs=clamp, load=load, tol_force=1e-10)
+    # springs in parallel: u = P / (EA/L + k) (axial co-rotational bar: N = EA/L0 (l - L0) exactly)
+    assert res.state.x[n, 0] - L == pytest.approx(P / (EA / L + k), rel=1e-9)
+    assert res.iterations <= 2
+    # the reaction at the clamp carries the part of P the bar takes
+    assert -res.reactions[0] == pytest.approx(P * (EA / L) / (EA / L + k), rel=1e-8)
+    # without the load tangent the same Newton iteration diverges (the load stiffness is what the tangent adds)
+    with pytest.raises(ConvergenceError):
+        StaticSolver(asm, max_iter=20).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
+                                             load=_TipSpringLoad(asm, n, P, k, L, with_tangent=False))
