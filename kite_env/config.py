@@ -63,6 +63,51 @@ class FsiConfig:
     cold_load_steps: int = 6  # dynamic-pressure ramp for a cold start from the unloaded wing [-]
     relax_initial: float = 0.3  # first under-relaxation factor of the aero loads (Aitken thereafter) [-]
     relax_min: float = 0.02  # lower bound of the Aitken relaxation factor [-]
+    max_newton_iter: int = 30  # monolithic Newton iterations per solve [-]
+    max_retries: int = 2  # a failed solve is retried with twice as many bridle sub-steps, this many times [-]
+    extrapolate: bool = True  # warm time steps start from the linear extrapolation of the last two steps
+
+
+@dataclass(frozen=True)
+class DynamicsConfig:
+    # particle-system model of wing masses, bridle, KCU and tether (paper Sect. II.C, Fig. 5, Table 1)
+    mass_le_kg: float = 3.5  # m_A = m_C, 70 % of the wing mass at the leading edge (Table 1) [kg]
+    mass_te_kg: float = 1.5  # m_B = m_D (Table 1) [kg]
+    mass_kcu_kg: float = 3.0  # m_KCU (Table 1) [kg]
+    beta_ac: float = 0.02  # relative damping A-C (Table 1), fraction of critical [-]
+    beta_bd: float = 0.002  # relative damping B-D (Table 1) [-]
+    beta_diag: float = 0.015  # relative damping A-D and B-C (Table 1) [-]
+    line_diameter_m: float = 0.0012  # bridle-line diameter d_c (Table 1) [m]
+    line_cd: float = 1.1  # cylinder drag coefficient of a line in cross flow (physics_facts 4.1, kitesim) [-]
+    line_stiffness_N_per_m: float = 4.52e3  # k_c (Table 1) [N/m]
+    line_damping_Ns_per_m: float = 251.7  # c_c (Table 1) [N s/m]
+    power_line_length_m: float = 25.0  # rest lengths L_A = L_C (Table 1) [m]
+    tether_length_m: float = 80.0  # l_t = |r_KCU| (Table 1) [m]
+    tether_diameter_m: float = 0.0  # tether drag (not in the paper's model: 0 = off) [m]
+    gravity_mps2: float = 9.81  # [m/s^2]
+    dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
+    baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    # the paper's steering (Eq. 14-17) and force (Eq. 18-19) controllers; gains not given in the paper
+    k1_m_per_rad: float = 0.3  # heading error -> desired steering-line difference, Eq. (15) [m/rad]
+    k2: float = 2.0  # steering-line length loops, Eq. (16-17) [-]
+    k3_m: float = 0.5  # force-ratio loop, Eq. (19) [m]
+    mu_target: float = 0.3  # desired force ratio mu* (Sect. III.B) [-]
+    delta_l_max_m: float = 0.25  # limit of the desired steering-line difference |dl*| [m]
+    beta_distance_deg: float = 4.0  # blending: beta = 1/2 at this distance to the path (on the unit sphere) [deg]
+    beta_min: float = 0.2  # blending: smallest weight of the path tangent [-]
+    control_dt_s: float = 0.02  # controller update period [s]
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    duration_s: float = 60.0  # simulated time [s]
+    warmup_s: float = 3.0  # initial transient excluded from the metrics [s]
+    initial_speed_mps: float = 20.0  # initial flight speed along the path [m/s]
+    seed: int = 0  # random seed (wind turbulence) [-]
 
 
 @dataclass(frozen=True)
@@ -71,6 +116,9 @@ class Config:
     structure: StructureConfig = field(default_factory=StructureConfig)
     aero: AeroConfig = field(default_factory=AeroConfig)
     fsi: FsiConfig = field(default_factory=FsiConfig)
+    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
@@ -82,7 +130,17 @@ _POSITIVE = {
     "structure.tube_pressure_Pa", "structure.tube_wall_Et_N_per_m", "structure.tip_rod_E_Pa", "structure.te_wire_E_Pa",
     "structure.te_hem_EI_Nm2",
     "aero.rho_kg_m3", "fsi.tol_disp_m", "fsi.tol_force_rel", "fsi.max_coupling_iter", "fsi.cold_load_steps",
-    "fsi.relax_initial", "fsi.relax_min", "fsi.newton_per_coupling", "fsi.max_bridle_step_m",
+    "fsi.relax_initial", "fsi.relax_min", "fsi.newton_per_coupling", "fsi.max_bridle_step_m", "fsi.max_newton_iter",
+    "dynamics.mass_le_kg", "dynamics.mass_te_kg", "dynamics.mass_kcu_kg", "dynamics.line_diameter_m",
+    "dynamics.line_stiffness_N_per_m", "dynamics.power_line_length_m", "dynamics.tether_length_m", "dynamics.dt_s",
+    "dynamics.baumgarte_1_per_s", "control.k2", "control.delta_l_max_m", "control.beta_distance_deg",
+    "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps",
+}
+# values that must be >= 0
+_NON_NEGATIVE = {
+    "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
+    "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
+    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "sim.seed",
 }
 
 
@@ -165,6 +223,10 @@ def _validate(cfg: Config) -> None:
             v = getattr(sec, f.name)
             if key in _POSITIVE and not v > 0:
                 raise ConfigError(f"config key '{key}' must be positive, got {v!r}")
+            if key in _NON_NEGATIVE and not v >= 0:
+                raise ConfigError(f"config key '{key}' must be >= 0, got {v!r}")
+    if cfg.control.beta_min > 1.0:
+        raise ConfigError(f"config key 'control.beta_min' must lie in [0, 1], got {cfg.control.beta_min}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:
         raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
     if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 7:

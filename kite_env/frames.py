@@ -42,3 +42,29 @@ def to_frame(vec: np.ndarray, R: np.ndarray) -> np.ndarray:
 def from_frame(vec_k: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Components in F of vectors given in K (``R @ vec_k``)."""
     return np.einsum("...ij,...j->...i", R, vec_k)
+
+
+def kite_frame_rates(pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Frame K and its motion from the positions and velocities of A, B, C, D (rows of ``pos``, ``vel`` (4, 3)).
+
+    Returns ``origin (3,)``, ``R (3, 3)`` (columns x_k, y_k, z_k), the origin velocity ``v_k = (v_A + v_C) / 2`` and
+    the angular velocity ``omega`` of the frame, all in the frame of the input (the wind frame in the flight model).
+    ``omega = 1/2 sum_i e_i × de_i/dt`` with the exact time derivatives of the unit vectors of :func:`kite_frame`;
+    this is the rotation rate of K itself (the paper's wing state X: v_k, omega_k), not a rigid-body fit of A-D.
+    """
+    pos = np.asarray(pos, dtype=float)
+    vel = np.asarray(vel, dtype=float)
+    origin, R = kite_frame(pos[0], pos[1], pos[2], pos[3])
+    ex, ey, ez = R[:, 0], R[:, 1], R[:, 2]
+    v_k = 0.5 * (vel[0] + vel[2])
+    d, dd = pos[0] - pos[2], vel[0] - vel[2]
+    ld = np.linalg.norm(d)
+    dey = (dd - ey * (ey @ dd)) / ld
+    m = 0.5 * (pos[1] + pos[3]) - origin
+    dm = 0.5 * (vel[1] + vel[3]) - v_k
+    xp = m - (m @ ey) * ey
+    dxp = dm - ((dm @ ey) + (m @ dey)) * ey - (m @ ey) * dey
+    dex = (dxp - ex * (ex @ dxp)) / np.linalg.norm(xp)
+    dez = np.cross(dex, ey) + np.cross(ex, dey)
+    omega = 0.5 * (np.cross(ex, dex) + np.cross(ey, dey) + np.cross(ez, dez))
+    return origin, R, v_k, omega

@@ -54,3 +54,25 @@ def test_kite_frame_orthonormal_right_handed_and_definition():
     assert np.allclose(R, Q)  # recovers the rotation that placed the kite
     v = rng.normal(size=3)
     assert np.allclose(from_frame(to_frame(v, R), R), v)
+
+
+def test_kite_frame_rates_match_finite_differences():
+    from kite_env.frames import kite_frame, kite_frame_rates
+    from kite_env.structure.rotations import expm, logm
+
+    rng = np.random.default_rng(7)
+    pos = np.array([[0.0, 2.6, 0.0], [0.6, 2.5, 0.1], [0.0, -2.6, 0.0], [0.6, -2.5, -0.1]]) + 0.05 * rng.normal(
+        size=(4, 3))
+    vel = 3.0 * rng.normal(size=(4, 3))
+    o, R, v_k, omega = kite_frame_rates(pos, vel)
+    h = 1e-6
+    o2, R2 = kite_frame(*(pos + h * vel))
+    o1, R1 = kite_frame(*(pos - h * vel))
+    np.testing.assert_allclose(v_k, (o2 - o1) / (2 * h), atol=1e-7)
+    # dR/dt = skew(omega) R
+    np.testing.assert_allclose(logm(R2 @ R1.T) / (2 * h), omega, atol=1e-6)
+    # a rigid rotation of the four points with omega0 gives omega0
+    omega0 = np.array([0.3, -1.2, 0.7])
+    vel_rigid = np.cross(omega0, pos - o) + np.array([1.0, 2.0, 3.0])
+    np.testing.assert_allclose(kite_frame_rates(pos, vel_rigid)[3], omega0, atol=1e-12)
+    assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) > 0 and np.allclose(expm(np.zeros(3)), np.eye(3))

@@ -1,0 +1,237 @@
+"""Flight simulation: the particle system coupled with the static aeroelastic wing (Bosch et al., Sect. II.D, Fig. 6).
+
+One time step ``dt`` (``dynamics.dt_s``):
+
+1. frame K, its origin velocity ``v_k`` and rotation rate ``omega_k`` from A-D (:func:`kite_env.frames.kite_frame_rates`);
+   the wing state X = (v_k, omega_k, v_w) and the bridle-point positions ``q_b`` in K;
+2. the static aeroelastic wing at ``q_b`` and X (:class:`kite_env.fsi.AeroelasticWing`), warm-started from the last
+   step, with the deformation velocity of Eq. (3) over ``dt``; it returns ``F_b``, and ``F_k = -F_b`` acts on A-D;
+3. the particle system (:mod:`kite_env.dynamics.particles`) advanced by one classical Runge-Kutta step (RK4). The
+   wing force is held constant in frame K over the step (it turns with the kite through the stage frames), as in
+   the staggered scheme of Fig. 6 where the wing is solved once per step;
+4. positions and velocities projected onto the tether and tip constraints (the drift before the projection is
+   recorded).
+
+The paper used Matlab's adaptive RK45 (mean step 5.3 ms); we use a fixed step of the same size so that a run is
+reproducible bit for bit and the wing's warm start sees equal steps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kite_env.config import Config
+from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
+from kite_env.frames import kite_frame_rates
+from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
+
+
+class SimulationError(RuntimeError):
+    """The flight simulation cannot continue (wing did not converge, non-finite state); ``reason`` says why."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+@dataclass
+class StepRecord:
+    """What one time step produced (frame W unless noted)."""
+
+    t: float
+    state: ParticleState
+    wing: WingSolution
+    R_wk: np.ndarray  # (3, 3) kite frame at the start of the step
+    v_kite: np.ndarray  # (3,) velocity of r_k [m/s]
+    omega: np.ndarray  # (3,) rotation rate of K [rad/s]
+    v_wind: np.ndarray  # (3,) wind at r_k [m/s]
+    line_tension: np.ndarray  # (4,) F_c of the bridle lines A, B, C, D [N]
+    line_length: np.ndarray  # (4,) [m]
+    tether_force: float  # [N], constraint force of the tether
+    constraint_drift: np.ndarray  # (3,) [m] before the projection
+    extra: dict = field(default_factory=dict)
+
+
+def _rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = axis / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+class FlightSimulator:
+    """The complete flight model: five masses, bridle, tether and the aeroelastic wing.
+
+    Parameters
+    ----------
+    cfg : Config
+    wind : object with ``velocity(t, r) -> (n, 3)`` in W
+    wing : AeroelasticWing, optional
+        Built from ``cfg.kite`` when not given.
+    """
+
+    def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None):
+        from kite_env.polar import nominal_wing
+
+        self.cfg = cfg
+        self.wind = wind
+        self.wing = wing if wing is not None else nominal_wing(cfg.kite.name, cfg)
+        self.dt = cfg.dynamics.dt_s
+        q0 = self.wing.design_bridle
+        self.tip_lengths = np.array([np.linalg.norm(q0[0] - q0[1]), np.linalg.norm(q0[2] - q0[3])])
+        self.particles: ParticleSystem | None = None
+        self.state: ParticleState | None = None
+        self.t = 0.0
+        self.L_B0 = self.L_D0 = None
+        self._F_k_K = None  # wing force on A-D held over the step, frame K
+
+    # ------------------------------------------------------------------ set-up
+    def _flight_state(self, t: float, st: ParticleState):
+        origin, R, v_k, omega = kite_frame_rates(st.r[:4], st.v[:4])
+        v_w = np.asarray(self.wind.velocity(t, origin[None, :]), dtype=float).reshape(3)
+        X = FlightState(v_kite=R.T @ v_k, omega=R.T @ omega, v_wind=R.T @ v_w)
+        q_b = (st.r[:4] - origin) @ R
+        return origin, R, v_k, omega, v_w, X, q_b
+
+    def reset(self, R0: np.ndarray, e_t: np.ndarray, speed_mps: float | None = None, t0: float = 0.0) -> StepRecord:
+        """Place the kite with its KCU at ``l_t R0`` flying along the unit tangent ``e_t`` and solve the wing cold.
+
+        The kite frame is oriented with the nose (``-x_k``) along ``e_t`` and pitched about ``y_k`` so that the
+        bridle (KCU to r_k) continues the tether. The KCU sits below the tip mid-chord (as
+        :meth:`AeroelasticWing.kcu_position`) at the power-line rest length plus the static line stretch. The
+        steering-line rest lengths ``L_B0 = L_D0`` are set so that the initial steering lines carry their share of
+        the initial wing force (the controllers adjust them from there).
+        """
+        cfg = self.cfg
+        speed = cfg.sim.initial_speed_mps if speed_mps is None else float(speed_mps)
+        R0 = np.asarray(R0, float) / np.linalg.norm(R0)
+        e_t = np.asarray(e_t, float)
+        e_t = e_t - (e_t @ R0) * R0
+        e_t /= np.linalg.norm(e_t)
+        wing = self.wing
+        wing.reset()
+        wing.line_length_m = cfg.dynamics.power_line_length_m
+        v0 = speed * e_t
+        # orientation before the pitch: x' = -e_t (nose along the path), z' = R0 (away from the ground)
+        xp, zp = -e_t, R0
+        yp = np.cross(zp, xp)
+        R_base = np.stack([xp, yp, zp], axis=1)
+        v_wind = np.asarray(self.wind.velocity(t0, (cfg.dynamics.tether_length_m * R0)[None, :])).reshape(3)
+        X = FlightState(v_kite=R_base.T @ v0, omega=np.zeros(3), v_wind=R_base.T @ v_wind)
+        try:
+            # static equilibrium of the wing held by its bridle lines (tips free to move in y_k): the initial shape
+            # and bridle-point positions, so that the flight does not start with the unloaded design tip distance
+            sol = wing.solve(None, X, support="lines", warm=False)
+        except WingConvergenceError as exc:
+            raise SimulationError("wing did not converge at the initial state", str(exc).splitlines()[0]) from exc
+        q0 = sol.nodes[wing.bridle].copy()
+        kcu = wing.kcu_position()
+        e_line = kcu - q0
+        e_line /= np.linalg.norm(e_line, axis=1, keepdims=True)
+        T0 = np.maximum(np.einsum("ij,ij->i", -sol.F_b, -e_line), 1.0)  # wing pull along each line [N]
+        k_c = cfg.dynamics.line_stiffness_N_per_m
+        # KCU on the symmetry plane at the stretched power-line length from A and C
+        L_pow = cfg.dynamics.power_line_length_m + 0.5 * (T0[0] + T0[2]) / k_c
+        a = q0[0]
+        h = np.sqrt(max(L_pow**2 - a[1] ** 2 - (kcu[0] - a[0]) ** 2, 1.0))
+        kcu = np.array([kcu[0], 0.0, a[2] - h])
+        theta = np.arctan2(-kcu[0], -kcu[2])
+        R_wk = _rotation_about(yp, theta) @ R_base
+        r_kcu = cfg.dynamics.tether_length_m * R0
+        origin = r_kcu - R_wk @ kcu
+        r = np.vstack([origin + q0 @ R_wk.T, r_kcu[None, :]])
+        v = np.repeat(v0[None, :], 5, axis=0)
+        l_B, l_D = np.linalg.norm(r[B] - r_kcu), np.linalg.norm(r[D] - r_kcu)
+        self.L_B0 = float(0.5 * (l_B + l_D) - 0.5 * (T0[1] + T0[3]) / k_c)
+        self.L_D0 = self.L_B0
+        k_pairs = tip_stiffness(wing, q0, X, sol)
+        self.pair_stiffness = k_pairs
+        self.particles = ParticleSystem(cfg.dynamics, self.tip_lengths, k_pairs, cfg.aero.rho_kg_m3)
+        self.particles.set_steering(self.L_B0, self.L_D0)
+        r, v = self.particles.project(r, v)
+        self.state = ParticleState(r, v)
+        self.t = t0
+        return self._solve_wing(first=True)
+
+    # ------------------------------------------------------------------ stepping
+    def _solve_wing(self, first: bool = False) -> StepRecord:
+        st = self.state
+        origin, R, v_k, omega, v_w, X, q_b = self._flight_state(self.t, st)
+        try:
+            sol = self.wing.solve(q_b, X, dt=None if first else self.dt, support="prescribed", warm=True)
+        except WingConvergenceError as exc:
+            raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
+        self._F_k_K = -sol.F_b
+        T, l = self.particles.line_forces(st.r, st.v)
+        return StepRecord(t=self.t, state=st.copy(), wing=sol, R_wk=R, v_kite=v_k, omega=omega, v_wind=v_w,
+                          line_tension=T, line_length=l, tether_force=float("nan"), constraint_drift=np.zeros(3))
+
+    def _rhs(self, t: float, r: np.ndarray, v: np.ndarray):
+        _, R = _frame(r)
+        f_wing = self._F_k_K @ R.T
+        wind = np.asarray(self.wind.velocity(t, r), dtype=float)
+        f, _ = self.particles.forces(r, v, wind, f_wing)
+        a, lam = self.particles.accelerations(r, v, f)
+        return v, a, lam
+
+    def step(self, L_B: float, L_D: float) -> StepRecord:
+        """Advance by ``dt`` with the steering-line rest lengths ``L_B`` (right), ``L_D`` (left) [m]."""
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        self.particles.set_steering(L_B, L_D)
+        dt, t = self.dt, self.t
+        r0, v0 = self.state.r, self.state.v
+        k1v, k1a, lam = self._rhs(t, r0, v0)
+        k2v, k2a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a)
+        k3v, k3a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a)
+        k4v, k4a, _ = self._rhs(t + dt, r0 + dt * k3v, v0 + dt * k3a)
+        r = r0 + dt / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        v = v0 + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+            raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
+        drift = self.particles.constraint_violation(r)
+        r, v = self.particles.project(r, v)
+        self.state = ParticleState(r, v)
+        self.t = t + dt
+        rec = self._solve_wing()
+        rec.constraint_drift = drift
+        # tether tension at the start of the step: the constraint force G^T lambda = lambda r_KCU pulls the KCU
+        # towards the ground station (lambda < 0)
+        rec.tether_force = float(-lam[0] * self.cfg.dynamics.tether_length_m)
+        return rec
+
+
+def _frame(r: np.ndarray):
+    from kite_env.frames import kite_frame
+
+    return kite_frame(r[A], r[B], r[C], r[D])
+
+
+def tip_stiffness(wing: AeroelasticWing, q_b: np.ndarray, X: FlightState, sol: WingSolution,
+                  h: float = 5e-3) -> np.ndarray:
+    """Stiffness ``k_ij`` [N/m] of the wing between the damped point pairs (A-C, B-D, A-D, B-C).
+
+    The paper derives its tip damping "from the bending stiffness between the wing tips from numerical experiments";
+    here: the two points are moved apart by ``h`` along their connecting line (static, prescribed bridle, warm from
+    ``sol``) and ``k = d(F_b,i - F_b,j) . e_ij / d(l_ij)`` from central differences. Negative values (a pair the
+    loaded wing pushes apart) are returned as they are and give no damping.
+    """
+    state0 = wing.state.copy()
+    out = np.zeros(len(DAMPED_PAIRS))
+    for n, (i, j) in enumerate(DAMPED_PAIRS):
+        e = q_b[i] - q_b[j]
+        e /= np.linalg.norm(e)
+        dF = []
+        for sgn in (1.0, -1.0):
+            q = q_b.copy()
+            q[i] += 0.25 * sgn * h * e
+            q[j] -= 0.25 * sgn * h * e
+            wing.state = state0.copy()
+            s = wing.solve(q, X, support="prescribed", warm=True, commit=False)
+            dF.append((s.F_b[i] - s.F_b[j]) @ e)
+        # l_ij changed by h between the two solves; a spring k between i and j gives d(F_i - F_j).e = 2 k dl
+        out[n] = (dF[0] - dF[1]) / (2.0 * h)
+    wing.state = state0
+    return out

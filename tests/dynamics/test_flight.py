@@ -1,0 +1,69 @@
+"""The flight model (Sect. II.C-D, Fig. 6): particle system + aeroelastic wing, stepped in time."""
+
+import numpy as np
+import pytest
+
+from kite_env.config import Config
+from kite_env.dynamics.simulator import FlightSimulator
+
+
+class UniformWind:
+    def __init__(self, speed=5.0):
+        self.speed = speed
+
+    def velocity(self, t, r):
+        r = np.asarray(r, dtype=float)
+        out = np.zeros(r.shape)
+        out[..., 0] = self.speed
+        return out
+
+
+def start(sim):
+    el = np.deg2rad(30.0)
+    R0 = np.array([np.cos(el), 0.0, np.sin(el)])
+    up = np.array([-np.sin(el), 0.0, np.cos(el)])
+    return sim.reset(R0, up, 20.0)
+
+
+@pytest.fixture(scope="module")
+def flight():
+    sim = FlightSimulator(Config(), UniformWind())
+    first = start(sim)
+    recs = [sim.step(sim.L_B0, sim.L_D0) for _ in range(60)]
+    return sim, first, recs
+
+
+def test_initial_state_is_consistent(flight):
+    sim, first, _ = flight
+    r = first.state.r
+    assert np.linalg.norm(r[4]) == pytest.approx(sim.cfg.dynamics.tether_length_m, abs=1e-9)
+    # lines taut and power lines carrying most of the load; the steering lines their share
+    T = first.line_tension
+    assert np.all(T[[0, 2]] > 500.0) and np.all(T[[1, 3]] > 50.0)
+    # the kite frame nose (-x_k) points along the initial direction of flight (up the sphere)
+    assert first.R_wk[:, 0] @ first.v_kite < -0.9 * np.linalg.norm(first.v_kite)
+
+
+def test_straight_flight_is_steady_and_physical(flight):
+    sim, _, recs = flight
+    drift = max(np.abs(r.constraint_drift).max() for r in recs)
+    assert drift < 1e-5  # per-step constraint drift before the projection [m]
+    for r in recs:
+        assert 1.5e3 < r.tether_force < 9e3
+        assert 15.0 < np.linalg.norm(r.v_kite) < 40.0
+        assert np.all(np.isfinite(r.wing.F_b))
+    # symmetric inputs, symmetric wind: no yaw, no lateral motion
+    assert abs(recs[-1].state.r[4, 1]) < 1e-3  # round-off asymmetry of the FE solution only
+    # the wing force on the bridle points balances most of the tether force (light masses)
+    F_wing = -recs[-1].wing.F_b.sum(axis=0)
+    assert np.linalg.norm(F_wing) == pytest.approx(recs[-1].tether_force, rel=0.3)
+
+
+def test_same_input_same_result_bit_for_bit(flight):
+    sim, _, recs = flight
+    sim2 = FlightSimulator(Config(), UniformWind())
+    start(sim2)
+    for _ in range(10):
+        rec = sim2.step(sim2.L_B0, sim2.L_D0)
+    assert np.array_equal(rec.state.r, recs[9].state.r)
+    assert np.array_equal(rec.wing.F_b, recs[9].wing.F_b)
