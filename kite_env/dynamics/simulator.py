@@ -98,8 +98,8 @@ class FlightSimulator:
     def reset(self, R0: np.ndarray, e_t: np.ndarray, speed_mps: float | None = None, t0: float = 0.0) -> StepRecord:
         """Place the kite with its KCU at ``l_t R0`` flying along the unit tangent ``e_t`` and solve the wing cold.
 
-        The kite frame is oriented with the nose (``-x_k``) along ``e_t`` and pitched about ``y_k`` so that the
-        bridle (KCU to r_k) continues the tether. The KCU sits below the tip mid-chord (as
+        The kite frame is oriented with the nose (``-x_k``) along the tangential part of the apparent velocity
+        (no sideslip) and pitched about ``y_k`` so that the bridle (KCU to r_k) continues the tether. The KCU sits below the tip mid-chord (as
         :meth:`AeroelasticWing.kcu_position`) at the power-line rest length plus the static line stretch. The
         steering-line rest lengths ``L_B0 = L_D0`` are set so that the initial steering lines carry their share of
         the initial wing force (the controllers adjust them from there).
@@ -114,11 +114,14 @@ class FlightSimulator:
         wing.reset()
         wing.line_length_m = cfg.dynamics.power_line_length_m
         v0 = speed * e_t
-        # orientation before the pitch: x' = -e_t (nose along the path), z' = R0 (away from the ground)
-        xp, zp = -e_t, R0
+        v_wind = np.asarray(self.wind.velocity(t0, (cfg.dynamics.tether_length_m * R0)[None, :])).reshape(3)
+        # orientation before the pitch: nose (-x') along the tangential part of the apparent velocity v0 - v_w (no
+        # sideslip, a symmetric start), z' = R0 (away from the ground)
+        nose = v0 - v_wind
+        nose = nose - (nose @ R0) * R0
+        xp, zp = -nose / np.linalg.norm(nose), R0
         yp = np.cross(zp, xp)
         R_base = np.stack([xp, yp, zp], axis=1)
-        v_wind = np.asarray(self.wind.velocity(t0, (cfg.dynamics.tether_length_m * R0)[None, :])).reshape(3)
         X = FlightState(v_kite=R_base.T @ v0, omega=np.zeros(3), v_wind=R_base.T @ v_wind)
         try:
             # static equilibrium of the wing held by its bridle lines (tips free to move in y_k): the initial shape
@@ -164,13 +167,19 @@ class FlightSimulator:
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
         self._F_k_K = -sol.F_b
+        self._q_b_K = q_b
+        self._K_b = self.wing.bridle_stiffness()
         T, l = self.particles.line_forces(st.r, st.v)
         return StepRecord(t=self.t, state=st.copy(), wing=sol, R_wk=R, v_kite=v_k, omega=omega, v_wind=v_w,
                           line_tension=T, line_length=l, tether_force=float("nan"), constraint_drift=np.zeros(3))
 
     def _rhs(self, t: float, r: np.ndarray, v: np.ndarray):
-        _, R = _frame(r)
-        f_wing = self._F_k_K @ R.T
+        origin, R = _frame(r)
+        # wing force at this stage: the step's solution, corrected linearly for the bridle points' move within the
+        # step (condensed wing stiffness): without it the held force lags the motion and the tip modes of the
+        # wing (about 100 rad/s) are excited by the explicit coupling
+        dq = ((r[:4] - origin) @ R - self._q_b_K).ravel()
+        f_wing = (self._F_k_K - (self._K_b @ dq).reshape(4, 3)) @ R.T
         wind = np.asarray(self.wind.velocity(t, r), dtype=float)
         f, _ = self.particles.forces(r, v, wind, f_wing)
         a, lam = self.particles.accelerations(r, v, f)

@@ -154,6 +154,18 @@ class BeamSet:
         self._k11 = np.stack([self.GJ, 4.0 * self.EI2, 4.0 * self.EI3], axis=-1) / L0[:, None]
         self._k12 = np.stack([-self.GJ, 2.0 * self.EI2, 2.0 * self.EI3], axis=-1) / L0[:, None]
 
+    def set_bending_torsion(self, rows: np.ndarray, EI: np.ndarray, GJ: np.ndarray) -> None:
+        """Fast in-place update of ``EI2 = EI3 = EI`` and ``GJ`` for the beams ``rows`` (index array), for a
+        stiffness law evaluated every iteration (inflated tubes); values must be finite and >= 0 (not checked)."""
+        self.EI2[rows] = EI
+        self.EI3[rows] = EI
+        self.GJ[rows] = GJ
+        iL = 1.0 / self.L0[rows]
+        self._k11[rows, 0] = GJ * iL
+        self._k11[rows, 1] = self._k11[rows, 2] = 4.0 * EI * iL
+        self._k12[rows, 0] = -GJ * iL
+        self._k12[rows, 1] = self._k12[rows, 2] = 2.0 * EI * iL
+
     # ------------------------------------------------------------------------------------------ kinematics
     def _frame(self, x_e, R_e):
         """Co-rotated frame and local deformations (see module docstring)."""

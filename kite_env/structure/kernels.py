@@ -228,6 +228,36 @@ def beam_local_rotations(x_e, R_e, R0, l_out, th_out):
 
 
 @njit(**_JIT)
+def rotate_nodes(Rn, dw, out):
+    """``out[n] = expm(dw[n]) @ Rn[n]`` (Rodrigues, series below ``_ROT_SMALL`` as :func:`rotations.expm`)."""
+    for n in range(Rn.shape[0]):
+        w0, w1, w2 = dw[n, 0], dw[n, 1], dw[n, 2]
+        t2 = w0 * w0 + w1 * w1 + w2 * w2
+        t = math.sqrt(t2)
+        if t < _ROT_SMALL:
+            a = 1.0 - t2 / 6.0
+            b = 0.5 - t2 / 24.0
+        else:
+            a = math.sin(t) / t
+            b = (1.0 - math.cos(t)) / t2
+        # E = I + a K + b K K with K = skew(w); K K = w w^T - t2 I
+        e00 = 1.0 + b * (w0 * w0 - t2)
+        e11 = 1.0 + b * (w1 * w1 - t2)
+        e22 = 1.0 + b * (w2 * w2 - t2)
+        e01 = -a * w2 + b * w0 * w1
+        e10 = a * w2 + b * w0 * w1
+        e02 = a * w1 + b * w0 * w2
+        e20 = -a * w1 + b * w0 * w2
+        e12 = -a * w0 + b * w1 * w2
+        e21 = a * w0 + b * w1 * w2
+        for j in range(3):
+            r0, r1, r2 = Rn[n, 0, j], Rn[n, 1, j], Rn[n, 2, j]
+            out[n, 0, j] = e00 * r0 + e01 * r1 + e02 * r2
+            out[n, 1, j] = e10 * r0 + e11 * r1 + e12 * r2
+            out[n, 2, j] = e20 * r0 + e21 * r1 + e22 * r2
+
+
+@njit(**_JIT)
 def scatter_add(out, index, values):
     """``out[index[i]] += values[i]`` for all i (unbuffered, like ``np.add.at``; ``out`` is not cleared)."""
     for i in range(index.shape[0]):

@@ -29,6 +29,20 @@ _ROUNDOFF = 16.0
 _WORK_TOL = 1e-14
 
 
+def _compiled_rotate():
+    from .kernels import resolve_backend
+
+    if resolve_backend("auto") != "numba":
+        return None
+    from .kernels import rotate_nodes
+
+    return rotate_nodes
+
+
+#: compiled ``expm(dw) R`` for all nodes (numba backend), else None (NumPy Rodrigues)
+_rotate_nodes = _compiled_rotate()
+
+
 class ConvergenceError(RuntimeError):
     """Newton iterations failed; ``history`` holds ``(iteration, residual norm, increment norm)`` tuples."""
 
@@ -56,6 +70,10 @@ class NodalState:
     def updated(self, du: np.ndarray) -> "NodalState":
         """New state after the increment ``du`` (6 n_nodes,): translations added, spins applied as rotations."""
         d = du.reshape(-1, DOF_PER_NODE)
+        if _rotate_nodes is not None:
+            Rn = np.empty_like(self.Rn)
+            _rotate_nodes(np.ascontiguousarray(self.Rn), np.ascontiguousarray(d[:, 3:]), Rn)
+            return NodalState(self.x + d[:, :3], Rn)
         return NodalState(self.x + d[:, :3], np.einsum("nij,njk->nik", expm(d[:, 3:]), self.Rn))
 
 
@@ -111,6 +129,9 @@ class StaticSolver:
         self._lu = None
         self._lu_key = None
         self._diag_max = 0.0  # largest |K_ii| of the last assembled tangent (round-off floor of the residual)
+        self._lu_data = None  # tangent (pattern data, incl. load tangent) of the current factorisation
+        self._lu_free = None
+        self.n_factorizations = 0  # counter over the solver's lifetime
         self.auto_fixed = np.flatnonzero(np.repeat(~assembler._node_used, DOF_PER_NODE))
 
     def _reduced(self, fixed: np.ndarray):
@@ -125,6 +146,21 @@ class StaticSolver:
             hit = (free, sub.data.astype(np.int64) - 1, sub.indices.copy(), sub.indptr.copy(), key)
             self._sel_cache[key] = hit
         return hit
+
+    def condensed_tangent(self, dofs: np.ndarray) -> np.ndarray:
+        """Stiffness ``d r_b / d q_b`` (len(dofs) square) of the reactions at the prescribed ``dofs`` with the free DOF
+        in equilibrium: ``T_bb - T_bf T_ff^-1 T_fb`` with the tangent ``T`` of the current factorisation (which the
+        modified Newton may have kept from an earlier iterate: an approximation of the tangent at the solution).
+        ``dofs`` must be the prescribed DOF of the last solve."""
+        if self._lu is None:
+            raise RuntimeError("condensed_tangent needs a factorisation (call solve first)")
+        dofs = np.asarray(dofs, dtype=np.int64)
+        T = self.asm.matrix(self._lu_data).tocsr()
+        free = self._lu_free
+        T_fb = T[free][:, dofs].toarray()
+        T_bf = T[dofs][:, free]
+        T_bb = T[dofs][:, dofs].toarray()
+        return T_bb - T_bf @ self._lu.solve(T_fb)
 
     def forget_factorization(self) -> None:
         self._lu = None
@@ -243,6 +279,9 @@ class StaticSolver:
                     history.append((it, rnorm, np.nan))
                     raise ConvergenceError(f"tangent factorisation failed: {exc}", history) from exc
                 self._lu_key = lu_key
+                self._lu_data = data
+                self._lu_free = free
+                self.n_factorizations += 1
                 nfac += 1
             stale_step = not refactor
             duf = self._lu.solve(rf)

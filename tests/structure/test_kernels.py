@@ -271,3 +271,15 @@ def test_shell_wrinkling_per_backend(backend):
     _ts.test_wrinkling_force_continuous_across_state_boundaries()
     _ts.test_stress_free_state_has_linear_elastic_cst_tangent()
     _ts.test_rigid_body_motion_gives_zero_force()
+
+
+def test_rotate_nodes_matches_rodrigues():
+    from kite_env.structure.kernels import rotate_nodes
+    from kite_env.structure.rotations import expm
+
+    rng = np.random.default_rng(5)
+    R = expm(rng.normal(size=(50, 3)))
+    dw = rng.normal(size=(50, 3)) * np.logspace(-9, 0.5, 50)[:, None]  # through the series branch
+    out = np.empty_like(R)
+    rotate_nodes(R, dw, out)
+    np.testing.assert_allclose(out, np.einsum("nij,njk->nik", expm(dw), R), atol=1e-14)

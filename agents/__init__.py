@@ -1,0 +1,1 @@
+"""Flight-control policies: the paper's baseline controller (and, later, trained agents)."""

@@ -1,0 +1,66 @@
+"""Steering-line actuation: the K2 loops of the steering controller and the force controller (Bosch et al., Sect. III).
+
+The steering controller of the paper has two levels. The outer level turns the heading error into a desired
+steering-line length difference ``dl* = K1 (psi* - psi)`` (Eq. 15; :mod:`agents.baseline`, and the action of the
+Gymnasium environment). The inner level, implemented here, sets the rest lengths of the right (B) and left (D)
+steering-line springs from the error of the actual difference ``dl = l_B - l_D`` (Eq. 16-17), and the force
+controller adds the same increment to both (Eq. 18-19):
+
+    L_B = L_B,0 + K2 (dl* - dl) + L3
+    L_D = L_D,0 - K2 (dl* - dl) + L3,        L3 = -K3 (mu* - mu),   mu = (F_cB + F_cD) / (F_cA + F_cC)
+
+Sign of the K2 loop. Eq. (16-17) as printed read ``L_B = L_B,0 - K2 (dl* - dl)``, ``L_D = L_D,0 + K2 (dl* - dl)``
+with ``dl = l_B - l_D``: for K2 > 0 that lengthens the left and shortens the right line when ``dl`` should grow,
+which moves ``dl`` away from ``dl*`` (positive feedback). We use the sign that closes the loop (equivalently K2 < 0
+in the printed form); the paper's text ("proportional controllers ... to control the individual steering line
+lengths") leaves no doubt about the intent.
+
+Sign of the force loop, Eq. (19) as printed: ``L3 = -K3 (mu* - mu)`` with K3 > 0. With mu below mu* both steering
+lines get shorter; pulling both rear lines pitches the wing up (larger angle of attack) and moves load from the
+power lines to the steering lines, which raises mu.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kite_env.config import ControlConfig
+
+
+class LineActuator:
+    """Steering-line rest lengths from a desired length difference (Eq. 16-17) and the force ratio (Eq. 18-19).
+
+    Parameters
+    ----------
+    cfg : ControlConfig
+    L_B0, L_D0 : float [m]
+        Initial rest lengths of the right and left steering lines.
+    """
+
+    def __init__(self, cfg: ControlConfig, L_B0: float, L_D0: float):
+        self.cfg = cfg
+        self.L_B0 = float(L_B0)
+        self.L_D0 = float(L_D0)
+
+    @staticmethod
+    def force_ratio(line_tension: np.ndarray) -> float:
+        """mu = (F_cB + F_cD) / (F_cA + F_cC), Eq. (18); lines in the order A, B, C, D."""
+        T = np.asarray(line_tension, dtype=float)
+        return float((T[1] + T[3]) / max(T[0] + T[2], 1e-9))
+
+    def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray):
+        """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
+
+        ``delta_l_star`` [m] is clipped to ``+-control.delta_l_max_m``; ``line_length`` and ``line_tension`` are the
+        current lengths and tensions of the lines A, B, C, D.
+        """
+        cfg = self.cfg
+        dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
+        l = np.asarray(line_length, dtype=float)
+        dl = float(l[1] - l[3])  # Delta l = l_B - l_D (Sect. III.A)
+        mu = self.force_ratio(line_tension)
+        L3 = -cfg.k3_m * (cfg.mu_target - mu)  # Eq. (19)
+        e = dls - dl
+        L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
+        L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
+        return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
