@@ -95,6 +95,9 @@ class WingSolution:
     history: list[dict] = field(default_factory=list)
     tube_collapsed: np.ndarray | None = None  # (n_beams,) bool
     section_forces: np.ndarray | None = None  # (n_sec, m, 3) [N]
+    accepted: bool = False  # a Newton solve stalled within fsi.accept_force_rel instead of fsi.tol_force_rel
+    section_lift: np.ndarray | None = None  # (n_sec,) magnitude of each section's lift, Eq. (7) [N]
+    section_drag: np.ndarray | None = None  # (n_sec,) magnitude of each section's drag, Eq. (8) [N]
 
     @property
     def lift_to_drag(self) -> float:
@@ -350,19 +353,21 @@ class AeroelasticWing:
         for outer in range(1, n_outer + 1):
             try:
                 res = solver.solve(state, None, fixed, du_fixed, load=load, tol_force=fcfg.tol_force_rel,
-                                   tol_disp=fcfg.tol_disp_m)
+                                   tol_disp=fcfg.tol_disp_m, accept_force=fcfg.accept_force_rel)
             except ConvergenceError as exc:
                 history.append({"iter": len(history) + 1, "dx_max_m": np.nan, "dload_rel": np.nan,
                                 "newton_iters": len(exc.history), "residual_history": exc.history})
                 raise WingConvergenceError(f"monolithic aeroelastic Newton solve failed: {exc}", history) from exc
             state = res.state
             du_fixed = np.zeros_like(du_fixed)
-            f_ext = load.f_ext  # aero loads at the returned state (the solver's last iteration)
+            if res.accepted:  # the best iterate, not the last one: loads at that state
+                load.force(state)
+            f_ext = load.f_ext  # aero loads at the returned state
             fi_b = (res.reactions + f_ext).reshape(-1, 6)[b, :3]  # wing + line internal force at A-D
             entry = {"iter": len(history) + 1, "dx_max_m": res.history[-2][2] if len(res.history) > 1 else 0.0,
                      "dload_rel": 0.0, "newton_iters": res.iterations, "scale": scale, "method": "monolithic",
                      "residual_N": res.history[-1][1], "factorizations": res.factorizations,
-                     "jacobians": load.n_tangent}
+                     "jacobians": load.n_tangent, "accepted": res.accepted}
             history.append(entry)
             if support == "prescribed":
                 break
@@ -387,7 +392,10 @@ class AeroelasticWing:
             aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
             coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=sum(
                 h.get("newton_iters", 0) for h in history if "iter" in h),
+            accepted=any(h.get("accepted", False) for h in history),
             tube_collapsed=load.collapsed, section_forces=scale * loads.nodal_forces,
+            section_lift=scale * np.linalg.norm(loads.lift_local, axis=1),
+            section_drag=scale * np.linalg.norm(loads.drag_local, axis=1),
         )
         return state, sol
 
@@ -484,6 +492,8 @@ class AeroelasticWing:
             aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
             coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=newton_total,
             tube_collapsed=collapsed, section_forces=scale * loads.nodal_forces,
+            section_lift=scale * np.linalg.norm(loads.lift_local, axis=1),
+            section_drag=scale * np.linalg.norm(loads.drag_local, axis=1),
         )
         return state, sol
 
@@ -530,6 +540,7 @@ class _AeroLoad:
         # factorisations of the coupled tangent are reused across calls of the same kind only: static or time step
         # (the deformation-velocity term scales with 1/dt; dt in 25 % buckets) and load scale
         self.tangent_key = (round(scale, 6), None if not dt else int(round(np.log(dt) / np.log(1.25))))
+        self.c_node = wing.cfg.fsi.node_damping_Ns_per_m if (dt and wing._sec_prev is not None) else 0.0
         self.loads = None
         self.collapsed = None
         self.n_force = 0
@@ -539,7 +550,11 @@ class _AeroLoad:
         self.collapsed = self.wing._update_tube_stiffness(state)
         self.loads = self.wing._aero(state, self.flight, self.dt)
         self.n_force += 1
-        self.f_ext = self.wing._load_vector(self.loads, self.scale)
+        f = self.scale * self.loads.nodal_forces
+        if self.c_node > 0.0:
+            # nodal viscous damping of the massless structure over the time step (fsi.node_damping_Ns_per_m)
+            f = f - (self.c_node / self.dt) * (state.x[self.wing.mesh.sections] - self.wing._sec_prev)
+        self.f_ext = np.bincount(self.wing._load_dofs, weights=f.ravel(), minlength=self.wing.n_dof)
         return self.f_ext
 
     def tangent(self, state: NodalState) -> np.ndarray:
@@ -548,4 +563,8 @@ class _AeroLoad:
             state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
             w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt)
         self.n_tangent += 1
-        return self.asm.block_data(-self.scale * J)
+        J = -self.scale * J
+        if self.c_node > 0.0:
+            idx = np.arange(J.shape[1])
+            J[:, idx, idx] += self.c_node / self.dt
+        return self.asm.block_data(J)

@@ -35,15 +35,13 @@ elevation these are no longer the azimuth and elevation excursions (meridians co
 symmetric about the mean elevation (the tops of the lobes lie lower than the crossing + half the height).
 The elevation span cannot exceed about the half-width ``b`` (``max |phi| < b / 2``).
 
-Default figure (the paper gives no dimensions; its Fig. 9 shows one figure, P0 to P4, in a run of total flight
-time T = 20 s at v_w = 5 m/s, with the constant 80 m tether of Table 1 and computed flight speeds of 18-28 m/s,
-Sect. IV): width 80 deg azimuth, height 24 deg elevation (15.6 to 39.6 deg), crossing at 30 deg elevation. This is the upper end of common AWE practice (physics_facts 5.2-5.3:
-Schelbergen +-18.5-20 deg azimuth, +-4 deg elevation; Fechner 36 deg width, 24 deg elevation). Its length on
-the unit sphere is 3.152 rad = 252 m on an 80 m tether: one figure in 10.7 s at 23.5 m/s (10.1-11.5 s at
-25-22 m/s). A 20 s figure at these speeds needs ~5.9 rad of path, e.g. width 145 deg x height 42 deg at 25 deg
-elevation (lobes reaching +-72 deg azimuth, near the edge of the wind window: with the simple crosswind estimate
-v_k ~ (L/D) v_w cos(angle from the wind) the speed there is about a third of that at the centre), so the paper's 20 s cannot be matched with a figure of usual
-proportions at the paper's flight speeds (see :meth:`Lemniscate.period_estimate`).
+Default figure (the paper gives no dimensions; Fig. 9 flies one figure in T = 20 s at v_w = 5 m/s with a
+constant 80 m tether and computed flight speeds of 18-28 m/s, Sect. IV): width 120 deg azimuth, height 36 deg
+elevation, crossing at 30 deg elevation. The wing flies at the tether length plus the bridle (80 + 25 m), so the
+path on the unit sphere (4.7 rad long) is about 490 m for the wing: one figure in about 19-22 s at the paper's
+mean speeds of 22-25 m/s (:meth:`Lemniscate.period_estimate` with 105 m). This is wider than common AWE practice
+(physics_facts 5.2-5.3: Schelbergen +-18.5-20 deg azimuth, +-4 deg elevation; Fechner 36 deg width, 24 deg
+elevation), which would give figures of 8-12 s at these speeds; the paper's 20 s figure needs the large one.
 """
 
 from __future__ import annotations
@@ -142,8 +140,8 @@ def geodesic_distance(r1: np.ndarray, r2: np.ndarray) -> np.ndarray | float:
 # ---------------------------------------------------------------------------------------------- lemniscate
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    width_deg: float = 80.0  # full azimuth span of the figure-eight [deg]
-    height_deg: float = 24.0  # full elevation span of the figure-eight [deg]
+    width_deg: float = 120.0  # full azimuth span of the figure-eight [deg]
+    height_deg: float = 36.0  # full elevation span of the figure-eight [deg]
     elevation_deg: float = 30.0  # elevation of the crossing point [deg]
     azimuth_deg: float = 0.0  # azimuth of the crossing point [deg]
     n_samples: int = 2000  # precomputed samples for the global nearest-point search [-]

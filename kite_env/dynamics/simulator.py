@@ -86,6 +86,7 @@ class FlightSimulator:
         self.t = 0.0
         self.L_B0 = self.L_D0 = None
         self._F_k_K = None  # wing force on A-D held over the step, frame K
+        self._F_end_K = None  # predictor-corrector: wing force at the end of the step
 
     # ------------------------------------------------------------------ set-up
     def _flight_state(self, t: float, st: ParticleState):
@@ -159,11 +160,12 @@ class FlightSimulator:
         return self._solve_wing(first=True)
 
     # ------------------------------------------------------------------ stepping
-    def _solve_wing(self, first: bool = False) -> StepRecord:
+    def _solve_wing(self, first: bool = False, commit: bool = True) -> StepRecord:
         st = self.state
         origin, R, v_k, omega, v_w, X, q_b = self._flight_state(self.t, st)
         try:
-            sol = self.wing.solve(q_b, X, dt=None if first else self.dt, support="prescribed", warm=True)
+            sol = self.wing.solve(q_b, X, dt=None if first else self.dt, support="prescribed", warm=True,
+                                  commit=commit)
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
         self._F_k_K = -sol.F_b
@@ -173,17 +175,35 @@ class FlightSimulator:
         return StepRecord(t=self.t, state=st.copy(), wing=sol, R_wk=R, v_kite=v_k, omega=omega, v_wind=v_w,
                           line_tension=T, line_length=l, tether_force=float("nan"), constraint_drift=np.zeros(3))
 
-    def _rhs(self, t: float, r: np.ndarray, v: np.ndarray):
+    def _rhs(self, t: float, r: np.ndarray, v: np.ndarray, frac: float = 0.0):
         origin, R = _frame(r)
-        # wing force at this stage: the step's solution, corrected linearly for the bridle points' move within the
-        # step (condensed wing stiffness): without it the held force lags the motion and the tip modes of the
-        # wing (about 100 rad/s) are excited by the explicit coupling
-        dq = ((r[:4] - origin) @ R - self._q_b_K).ravel()
-        f_wing = (self._F_k_K - (self._K_b @ dq).reshape(4, 3)) @ R.T
+        if self._F_end_K is not None:
+            # corrector: the wing force interpolated in time between the solutions at both ends of the step
+            f_K = self._F_k_K + frac * (self._F_end_K - self._F_k_K)
+        else:
+            # the step's solution, corrected linearly for the bridle points' move within the step (condensed wing
+            # stiffness): without it the held force lags the motion and the tip modes of the wing are excited
+            dq = ((r[:4] - origin) @ R - self._q_b_K).ravel()
+            f_K = self._F_k_K - (self._K_b @ dq).reshape(4, 3)
+        f_wing = f_K @ R.T
         wind = np.asarray(self.wind.velocity(t, r), dtype=float)
         f, _ = self.particles.forces(r, v, wind, f_wing)
         a, lam = self.particles.accelerations(r, v, f)
         return v, a, lam
+
+    def _rk4(self, t, r0, v0):
+        dt = self.dt
+        k1v, k1a, lam = self._rhs(t, r0, v0, 0.0)
+        k2v, k2a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a, 0.5)
+        k3v, k3a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a, 0.5)
+        k4v, k4a, _ = self._rhs(t + dt, r0 + dt * k3v, v0 + dt * k3a, 1.0)
+        r = r0 + dt / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        v = v0 + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+            raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
+        drift = self.particles.constraint_violation(r)
+        r, v = self.particles.project(r, v)
+        return r, v, lam, drift
 
     def step(self, L_B: float, L_D: float) -> StepRecord:
         """Advance by ``dt`` with the steering-line rest lengths ``L_B`` (right), ``L_D`` (left) [m]."""
@@ -192,16 +212,18 @@ class FlightSimulator:
         self.particles.set_steering(L_B, L_D)
         dt, t = self.dt, self.t
         r0, v0 = self.state.r, self.state.v
-        k1v, k1a, lam = self._rhs(t, r0, v0)
-        k2v, k2a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a)
-        k3v, k3a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a)
-        k4v, k4a, _ = self._rhs(t + dt, r0 + dt * k3v, v0 + dt * k3a)
-        r = r0 + dt / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        v = v0 + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
-        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
-            raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
-        drift = self.particles.constraint_violation(r)
-        r, v = self.particles.project(r, v)
+        self._F_end_K = None
+        r, v, lam, drift = self._rk4(t, r0, v0)
+        if self.cfg.dynamics.coupling == "predictor_corrector":
+            # predictor: wing at the end of the explicit step (not committed); corrector: the step again with the
+            # wing force interpolated between both ends (a trapezoidal coupling of the wing force)
+            F_n, q_n, K_n = self._F_k_K, self._q_b_K, self._K_b
+            self.state, self.t = ParticleState(r, v), t + dt
+            pred = self._solve_wing(commit=False)
+            self._F_end_K = -pred.wing.F_b
+            self._F_k_K, self._q_b_K, self._K_b = F_n, q_n, K_n
+            r, v, lam, drift = self._rk4(t, r0, v0)
+            self._F_end_K = None
         self.state = ParticleState(r, v)
         self.t = t + dt
         rec = self._solve_wing()

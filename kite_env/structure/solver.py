@@ -85,6 +85,7 @@ class StaticResult:
     history: list = field(default_factory=list)
     converged: bool = True
     factorizations: int = 0
+    accepted: bool = False  # not converged to the tolerance, but within ``accept_force`` (see StaticSolver.solve)
 
 
 class StaticSolver:
@@ -168,7 +169,7 @@ class StaticSolver:
 
     def solve(self, state: NodalState, f_ext: np.ndarray | None, fixed_dofs=(), du_fixed=None,
               max_iter: int | None = None, allow_partial: bool = False, load=None, tol_force: float | None = None,
-              tol_disp: float | None = None) -> StaticResult:
+              tol_disp: float | None = None, accept_force: float | None = None) -> StaticResult:
         """Equilibrium from the start ``state`` with loads ``f_ext`` held fixed.
 
         Parameters
@@ -194,6 +195,11 @@ class StaticSolver:
             factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically.
         tol_force, tol_disp : float, optional
             Override the solver's tolerances for this call.
+        accept_force : float, optional
+            When the iteration limit is reached, return the iterate with the smallest residual (``converged=False``,
+            ``accepted=True``) if that residual is below ``accept_force`` times the load scale, instead of raising.
+            For stalls at a residual far below the physics' resolution (Newton chattering between the taut and
+            slack states of a wrinkling membrane, or across the kink of a max() in the loads).
 
         Returns
         -------
@@ -227,6 +233,7 @@ class StaticSolver:
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         # a factorisation is reused only for the same prescribed DOF and the same kind of load tangent
         lu_key = (key, getattr(load, "tangent_key", None))
+        best = (np.inf, None, None, None)  # (relative residual, state, residual vector, iteration)
         force_K = False  # refactor at this iterate (a step with a reused factorisation was rejected)
         stale_step = False  # the last step was made with a factorisation from an earlier iterate
         prev_st = st
@@ -246,6 +253,8 @@ class StaticSolver:
                 history.append((it, rnorm, np.nan))
                 raise ConvergenceError("non-finite residual in the static solve", history)
             scale = max(f_scale, float(np.linalg.norm(r[fixed])))
+            if rnorm / scale < best[0]:
+                best = (rnorm / scale, st, r, it)
             # Round-off floor of f_int: an element force such as EA/L0 (l - L0) carries an absolute error of about
             # eps |x| EA/L0, so with stiff members and small loads |r| can stagnate above tol_force * scale however
             # many iterations are made. After at least one Newton correction, a residual below that floor counts as
@@ -315,5 +324,7 @@ class StaticSolver:
         history.append((max_iter + 1, float(np.linalg.norm(r[free])), np.nan))
         if allow_partial and np.all(np.isfinite(r)):
             return StaticResult(st, -r, max_iter, history, False, nfac)
+        if accept_force is not None and best[0] <= accept_force:
+            return StaticResult(best[1], -best[2], max_iter, history, False, nfac, accepted=True)
         raise ConvergenceError(f"Newton did not converge in {max_iter} iterations", history)
 

@@ -1,5 +1,7 @@
 """The flight model (Sect. II.C-D, Fig. 6): particle system + aeroelastic wing, stepped in time."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -67,3 +69,21 @@ def test_same_input_same_result_bit_for_bit(flight):
         rec = sim2.step(sim2.L_B0, sim2.L_D0)
     assert np.array_equal(rec.state.r, recs[9].state.r)
     assert np.array_equal(rec.wing.F_b, recs[9].wing.F_b)
+
+
+def test_fly_logs_every_step_and_is_deterministic():
+    from kite_env.flight import fly
+
+    cfg = Config()
+    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, warmup_s=0.05))
+    a = fly(cfg, duration_s=0.1)
+    b = fly(cfg, duration_s=0.1)
+    n = int(round(0.1 / cfg.dynamics.dt_s)) + 1
+    assert not a.meta["crashed"] and a.meta["termination_reason"] == "completed"
+    for key in ("t", "r", "alpha", "line_tension", "tether_force", "psi", "path_s", "tip_disp_left"):
+        assert len(a.series[key]) == n
+        assert np.array_equal(a.series[key], b.series[key], equal_nan=True)
+    assert a.series["r"].shape == (n, 5, 3) and a.series["alpha"].shape[1] == a.meta["n_sections"]
+    # the kite starts at the crossing point and moves along the path
+    assert a.series["path_distance"].max() < np.radians(1.0)
+    assert a.series["path_s"][-1] > 0.0

@@ -209,3 +209,34 @@ def test_configuration_dependent_load_with_its_tangent():
     with pytest.raises(ConvergenceError):
         StaticSolver(asm, max_iter=20).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
                                              load=_TipSpringLoad(asm, n, P, k, L, with_tangent=False))
+
+
+def test_stalled_newton_is_accepted_only_within_accept_force():
+    """A tangent that is off by a constant factor converges linearly; with too few iterations the solve raises,
+    unless the best iterate is within ``accept_force``, which is then returned and flagged."""
+    n, L, EA = 4, 1.0, 1e4
+    X0 = np.zeros((n + 1, 3))
+    X0[:, 0] = np.linspace(0.0, L, n + 1)
+    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
+    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+
+    class HalfTangent(_TipSpringLoad):
+        def tangent(self, st):
+            block = np.zeros((1, 3, 3))
+            block[0, 0, 0] = 0.5 * self.k  # half the load stiffness: error factor 0.6 per iteration
+            return self.asm.block_data(block)
+
+    P, k = 50.0, 3.0 * EA / L
+    clamp = np.arange(6)
+    with pytest.raises(ConvergenceError):
+        StaticSolver(asm, max_iter=10).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
+                                             load=HalfTangent(asm, n, P, k, L), tol_force=1e-10)
+    res = StaticSolver(asm, max_iter=14).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
+                                               load=HalfTangent(asm, n, P, k, L), tol_force=1e-10, accept_force=1e-2)
+    assert res.accepted and not res.converged
+    u_exact = P / (EA / L + k)
+    assert abs(res.state.x[n, 0] - L - u_exact) < 0.02 * u_exact
+    with pytest.raises(ConvergenceError):  # 3 iterations are not within 1 %
+        StaticSolver(asm, max_iter=3).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
+                                            load=HalfTangent(asm, n, P, k, L), tol_force=1e-10, accept_force=1e-2)

@@ -1,0 +1,56 @@
+"""Steering-line actuator (Eq. 16-19) and the baseline heading policy (Eq. 14-15): signs, limits, blending."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from agents.baseline import BaselinePolicy
+from kite_env.config import ControlConfig
+from kite_env.control import LineActuator
+from kite_env.trajectory import Lemniscate, TrajectoryConfig, heading_angle, sphere_basis
+
+
+def test_actuator_closes_the_steering_loop_and_the_force_loop():
+    cfg = ControlConfig()
+    act = LineActuator(cfg, 25.2, 25.2)
+    lengths = np.array([25.1, 25.3, 25.1, 25.3])
+    T = np.array([1000.0, 300.0, 1000.0, 300.0])  # mu = 0.3: no force correction
+    L_B, L_D, info = act.rest_lengths(0.1, lengths, T)
+    assert info["mu"] == pytest.approx(0.3) and info["L3"] == pytest.approx(0.0)
+    # dl* > dl = 0: the right line is lengthened and the left one shortened by K2 (dl* - dl) (Eq. 16-17)
+    assert L_B - 25.2 == pytest.approx(cfg.k2 * 0.1) and 25.2 - L_D == pytest.approx(cfg.k2 * 0.1)
+    # mu below mu*: both steering lines shorter by K3 (mu* - mu) (Eq. 19)
+    T_low = np.array([1000.0, 200.0, 1000.0, 200.0])
+    L_B2, L_D2, info2 = act.rest_lengths(0.0, lengths, T_low)
+    assert L_B2 - 25.2 == pytest.approx(-cfg.k3_m * 0.1) and L_D2 == pytest.approx(L_B2)
+    # the desired difference is limited
+    _, _, info3 = act.rest_lengths(10.0, lengths, T)
+    assert info3["delta_l_star"] == cfg.delta_l_max_m
+
+
+def test_baseline_policy_signs_and_blending():
+    cfg = ControlConfig()
+    path = Lemniscate(TrajectoryConfig())
+    pol = BaselinePolicy(cfg, path)
+    pol.reset(0.0)
+    R = path.point(0.0)
+    e_t = path.tangent(0.0)
+    # on the path, heading along it: no steering
+    dl, info = pol(80.0 * R, e_t, 25.0 * e_t)
+    assert abs(dl) < 1e-9 and info["beta"] == pytest.approx(1.0)
+    # nose turned by +0.2 rad (towards y_s): a negative heading error -> dl* < 0 (pull the right line, turn right)
+    x_s, y_s = sphere_basis(R)
+    psi = float(heading_angle(R, e_t))
+    nose = math.cos(psi + 0.2) * x_s + math.sin(psi + 0.2) * y_s
+    dl, info = pol(80.0 * R, nose, 25.0 * e_t)
+    assert info["heading_error"] == pytest.approx(-0.2, abs=1e-9)
+    assert dl == pytest.approx(-0.2 * cfg.k1_m_per_rad)
+    # blending: 1 on the path, 1/2 at the blending distance (at the reference speed), beta_min far away
+    assert pol.blending(0.0, 25.0) == 1.0
+    assert pol.blending(math.radians(cfg.beta_distance_deg), 25.0) == pytest.approx(0.5)
+    assert pol.blending(1.0, 25.0) == cfg.beta_min
+    # a faster kite blends over a larger distance
+    d = math.radians(cfg.beta_distance_deg)
+    assert pol.blending(d, 40.0) > pol.blending(d, 25.0)
