@@ -73,7 +73,7 @@ class FsiConfig:
     relax_initial: float = 0.3  # first under-relaxation factor of the aero loads (Aitken thereafter) [-]
     relax_min: float = 0.02  # lower bound of the Aitken relaxation factor [-]
     max_newton_iter: int = 30  # monolithic Newton iterations per solve [-]
-    max_retries: int = 2  # a failed solve is retried with twice as many bridle sub-steps, this many times [-]
+    max_retries: int = 3  # retries of a failed solve: fresh start, damped Newton, then finer bridle sub-steps [-]
     extrapolate: bool = True  # warm time steps start from the linear extrapolation of the last two steps
 
 

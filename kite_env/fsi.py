@@ -172,6 +172,7 @@ class AeroelasticWing:
         self._sec_prev: np.ndarray | None = None  # section node positions at the previous time step (Eq. 3)
         self._step_prev: tuple | None = None  # (state, dt) before the last committed time step (predictor)
         self._kb_cache: tuple | None = None  # (factorisation count, bridle stiffness)
+        self._damped = False  # retry mode of the monolithic solve (StaticSolver.solve_damped)
         # kite control unit for support="lines": below the tip mid-chord, power-line length from the paper (Table 1)
         self.line_length_m = 25.0
 
@@ -298,26 +299,11 @@ class AeroelasticWing:
         for scale in ramp[:-1]:
             state, sol = step(state, q_b, flight, dt, support, scale, history)
         start = state
-        for attempt in range(self.cfg.fsi.max_retries + 1):
-            # a failed solve is retried from the last solution (not the predicted start) with a fresh factorisation,
-            # then from there with twice as many bridle sub-steps per further retry
-            try:
-                state = start
-                for k in range(1, n_sub + 1):
-                    q_k = q_start + (q_b - q_start) * (k / n_sub)
-                    state, sol = step(state, q_k, flight, dt, support, ramp[-1], history)
-                break
-            except WingConvergenceError:
-                if attempt == self.cfg.fsi.max_retries:
-                    raise
-                for solver in self._mono_solvers.values():
-                    solver.forget_factorization()
-                if predicted:
-                    predicted = False
-                    start = self.state.copy()
-                else:
-                    n_sub *= 2
-                history.append({"retry": attempt + 1, "n_sub": n_sub})
+        try:
+            state, sol = self._attempts(start, q_start, q_b, n_sub, predicted, flight, dt, support, ramp[-1], history,
+                                        step, method)
+        finally:
+            self._damped = False
         sol.history = history
         if commit:
             # time stepping (dt given, warm): remember the previous step for the linear predictor
@@ -326,6 +312,30 @@ class AeroelasticWing:
             self._sec_prev = state.x[self.mesh.sections].copy()
         sol.history.append({"wall_s": time.perf_counter() - t0})
         return sol
+
+    def _attempts(self, start, q_start, q_b, n_sub, predicted, flight, dt, support, scale, history, step, method):
+        """The solve of :meth:`solve` with its retries: from the last solution (not the predicted start) with a fresh
+        factorisation, then with the Levenberg-Marquardt-damped Newton, then with twice as many bridle sub-steps."""
+        for attempt in range(self.cfg.fsi.max_retries + 1):
+            try:
+                state = start
+                for k in range(1, n_sub + 1):
+                    q_k = q_start + (q_b - q_start) * (k / n_sub)
+                    state, sol = step(state, q_k, flight, dt, support, scale, history)
+                return state, sol
+            except WingConvergenceError:
+                if attempt == self.cfg.fsi.max_retries:
+                    raise
+                for solver in self._mono_solvers.values():
+                    solver.forget_factorization()
+                if predicted:
+                    predicted = False
+                    start = self.state.copy()
+                elif method == "monolithic" and not self._damped:
+                    self._damped = True
+                else:
+                    n_sub *= 2
+                history.append({"retry": attempt + 1, "n_sub": n_sub, "damped": self._damped})
 
     def _monolithic(self, state, q_b, flight, dt, support, scale, history):
         """Newton on the coupled residual ``F_a(x) - f_int(x) = 0`` with the aero load Jacobian in the tangent.
@@ -352,8 +362,12 @@ class AeroelasticWing:
             self.lines.tension[:] = max(float(np.linalg.norm(f0)) / 4.0, 1.0)
         for outer in range(1, n_outer + 1):
             try:
-                res = solver.solve(state, None, fixed, du_fixed, load=load, tol_force=fcfg.tol_force_rel,
-                                   tol_disp=fcfg.tol_disp_m, accept_force=fcfg.accept_force_rel)
+                if self._damped:
+                    res = solver.solve_damped(state, fixed, du_fixed, load, fcfg.tol_force_rel, fcfg.tol_disp_m,
+                                              max_iter=2 * fcfg.max_newton_iter, accept_force=fcfg.accept_force_rel)
+                else:
+                    res = solver.solve(state, None, fixed, du_fixed, load=load, tol_force=fcfg.tol_force_rel,
+                                       tol_disp=fcfg.tol_disp_m, accept_force=fcfg.accept_force_rel)
             except ConvergenceError as exc:
                 history.append({"iter": len(history) + 1, "dx_max_m": np.nan, "dload_rel": np.nan,
                                 "newton_iters": len(exc.history), "residual_history": exc.history})

@@ -148,6 +148,74 @@ class StaticSolver:
             self._sel_cache[key] = hit
         return hit
 
+    def solve_damped(self, state: NodalState, fixed_dofs, du_fixed, load, tol_force: float, tol_disp: float,
+                     max_iter: int = 60, lam0: float = 1e-3, accept_force: float | None = None) -> StaticResult:
+        """Levenberg-Marquardt-damped Newton for hard cases (a slack, luffing canopy): ``(T + lam D) du = r`` with
+        ``D`` the diagonal of the tangent; a step that does not lower the residual norm is rejected and ``lam``
+        grows (x4), an accepted one shrinks it (x0.3). Refactorises every iteration. Same convergence test and
+        result as :meth:`solve` (with a configuration-dependent ``load``); the damping changes only the path.
+        """
+        n = self.asm.n_dof
+        fixed_in = np.asarray(fixed_dofs, dtype=np.int64).ravel()
+        fixed = np.union1d(fixed_in, self.auto_fixed)
+        free, sel, ind, ptr, key = self._reduced(fixed)
+        du0 = np.zeros(n)
+        du0[fixed_in] = np.asarray(du_fixed, dtype=float).ravel()
+        st = state.updated(du0) if np.any(du0) else state.copy()
+
+        def residual(s):
+            f_ext = np.asarray(load.force(s), dtype=float)
+            f_int, kdata = self.asm.assemble_data(s.x, s.Rn, tangent=True)
+            r = f_ext - f_int
+            scale = max(np.linalg.norm(f_ext[free]), self.force_floor, float(np.linalg.norm(r[fixed])))
+            return r, kdata, scale
+
+        r, kdata, scale = residual(st)
+        lam = lam0
+        history = []
+        nfac = 0
+        best = (np.inf, None, None)
+        for it in range(1, max_iter + 1):
+            rnorm = float(np.linalg.norm(r[free]))
+            if not np.isfinite(rnorm):
+                raise ConvergenceError("non-finite residual in the damped Newton solve", history)
+            if rnorm / scale < best[0]:
+                best = (rnorm / scale, st, r)
+            last_du = history[-1][2] if history else np.inf
+            if rnorm <= tol_force * scale and last_du <= tol_disp:
+                history.append((it, rnorm, 0.0))
+                return StaticResult(st, -r, it - 1, history, True, nfac)
+            data = kdata + load.tangent(st)
+            diag = np.abs(data[self.asm.diag_index])
+            accepted_step = False
+            for _ in range(8):
+                d = data.copy()
+                d[self.asm.diag_index] += lam * np.maximum(diag, 1e-12 * diag.max())
+                Kff = sp.csc_matrix((d[sel], ind, ptr), shape=(free.size, free.size))
+                try:
+                    lu = spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
+                except RuntimeError:
+                    lam *= 4.0
+                    continue
+                nfac += 1
+                du = np.zeros(n)
+                du[free] = lu.solve(r[free])
+                trial = st.updated(du)
+                r_t, k_t, s_t = residual(trial)
+                if np.all(np.isfinite(r_t)) and np.linalg.norm(r_t[free]) < rnorm:
+                    st, r, kdata, scale = trial, r_t, k_t, s_t
+                    lam *= 0.3
+                    accepted_step = True
+                    break
+                lam *= 4.0
+            history.append((it, rnorm, float(np.max(np.abs(du.reshape(-1, DOF_PER_NODE)[:, :3])))
+                            if accepted_step else np.nan))
+            if not accepted_step:
+                break
+        if accept_force is not None and best[0] <= accept_force:
+            return StaticResult(best[1], -best[2], max_iter, history, False, nfac, accepted=True)
+        raise ConvergenceError(f"damped Newton did not converge in {len(history)} iterations", history)
+
     def condensed_tangent(self, dofs: np.ndarray) -> np.ndarray:
         """Stiffness ``d r_b / d q_b`` (len(dofs) square) of the reactions at the prescribed ``dofs`` with the free DOF
         in equilibrium: ``T_bb - T_bf T_ff^-1 T_fb`` with the tangent ``T`` of the current factorisation (which the
