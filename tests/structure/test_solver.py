@@ -240,3 +240,22 @@ def test_stalled_newton_is_accepted_only_within_accept_force():
     with pytest.raises(ConvergenceError):  # 3 iterations are not within 1 %
         StaticSolver(asm, max_iter=3).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
                                             load=HalfTangent(asm, n, P, k, L), tol_force=1e-10, accept_force=1e-2)
+
+
+@pytest.mark.parametrize("lam0", [1e-3, 10.0])
+def test_damped_newton_reaches_the_same_equilibrium(lam0):
+    """Levenberg-Marquardt damping changes the path, not the solution (spring-loaded bar, analytic answer)."""
+    n, L, EA = 4, 1.0, 1e4
+    X0 = np.zeros((n + 1, 3))
+    X0[:, 0] = np.linspace(0.0, L, n + 1)
+    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
+    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+    P, k = 50.0, 3.0 * EA / L
+    res = StaticSolver(asm).solve_damped(NodalState.reference(X0), np.arange(6), np.zeros(6),
+                                         _TipSpringLoad(asm, n, P, k, L), tol_force=1e-10, tol_disp=1e-12,
+                                         lam0=lam0)
+    assert res.converged
+    assert res.state.x[n, 0] - L == pytest.approx(P / (EA / L + k), rel=1e-8)
+    if lam0 > 1:  # heavily damped start: more, shorter steps
+        assert res.iterations > 2
