@@ -159,9 +159,9 @@ class AeroelasticWing:
         # Jacobian; mode "modified" keeps the factorisation across calls (time steps) while it still contracts
         self._mono_solvers = {
             "prescribed": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells], extra_blocks=mesh.sections),
-                                       mode="modified", max_iter=self.cfg.fsi.max_newton_iter),
+                                       mode="modified", max_iter=self.cfg.fsi.max_newton_iter, contraction=0.5),
             "lines": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines],
-                                            extra_blocks=mesh.sections), mode="modified",
+                                            extra_blocks=mesh.sections), mode="modified", contraction=0.5,
                                   max_iter=self.cfg.fsi.max_newton_iter),
         }
         self.bridle = np.asarray(mesh.bridle)
