@@ -271,7 +271,8 @@ def inflow(v_a: np.ndarray, geom: SectionGeometry) -> tuple[np.ndarray, np.ndarr
         Section-frame components ``(u · e_x, u · e_y, u · e_z)`` of the flow ``u = -v_a``; ``u_xz`` is
         ``u_loc[:, 0] e_x + u_loc[:, 2] e_z``.
     alpha : (n_sec,) float [rad]
-        ``atan2(u · e_z, u · e_x)``, in (-pi, pi]; 0 where there is no in-plane flow.
+        ``atan2(u · e_z, u · e_x)``, in (-pi, pi]; without in-plane flow the signed zeros give -pi or 0 (the
+        loads are zero either way).
     """
     u_loc = -(v_a[:, None, :] @ geom.frames)[:, 0, :]
     return u_loc, np.arctan2(u_loc[:, 2], u_loc[:, 0])

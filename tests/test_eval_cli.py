@@ -1,0 +1,157 @@
+"""``kite-eval`` in-process: bad input is refused cleanly, and one short real flight writes every output."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+import kite_env.flight
+import kite_env.plots
+from kite_env.cli.eval import main
+from kite_env.metrics import read_timeseries
+
+# the metric keys required by the issue
+ISSUE_KEYS = [
+    "sim_time_s", "wall_time_s", "real_time_factor", "crashed", "termination_reason", "figure_eights_completed",
+    "tracking_error_rms_deg", "tether_force_mean_N", "tether_force_min_N", "tether_force_max_N",
+    "kite_speed_min_mps", "kite_speed_max_mps", "lift_to_drag_min", "lift_to_drag_max", "lift_to_drag_mean",
+    "alpha_mid_mean_deg", "alpha_left_min_deg", "alpha_right_min_deg", "force_ratio_mu_min", "force_ratio_mu_max",
+    "steering_input_max_m", "yaw_rate_steering_corr", "heading_rate_mean_deg_s", "tip_distance_reduction_mean_m",
+    "tip_distance_variation_m", "tip_displacement_left_mean_m", "tip_displacement_right_mean_m", "metrics_window",
+    "paper_comparison",
+]
+PNGS = ["path.png", "wing_turn.png", "alpha.png", "tip_forces.png", "forces.png", "steering.png",
+        "yaw_vs_steering.png", "lift_to_drag.png", "tip_displacement.png"]
+SHORT = ["--duration", "0.3", "--set", "sim.warmup_s=0.1", "--quiet"]
+
+
+@pytest.mark.parametrize("args, token", [
+    (["--set", "dynamics.no_such_key=1"], "dynamics.no_such_key"),
+    (["--set", "dynamics.mass_le_kg=abc"], "dynamics.mass_le_kg"),
+    (["--set", "wind.speed_mps=-1"], "wind.speed_mps"),
+    (["--set", "dynamics.mass_kcu_kg=-3"], "dynamics.mass_kcu_kg"),
+    (["--set", "kite.name=nosuchkite"], "nosuchkite"),
+    (["--set", "no_equals_sign"], "no_equals_sign"),
+    (["--config", "does_not_exist.yaml"], "does_not_exist.yaml"),
+    (["--duration", "0"], "--duration"),
+    (["--duration", "-5"], "--duration"),
+    (["--duration", "nan"], "--duration"),
+    (["--duration", "abc"], "--duration"),
+    (["--seed", "1.5"], "--seed"),
+    (["--policy", "nosuchpolicy"], "baseline"),
+])
+def test_bad_input_exit_2_one_line_no_output(tmp_path, capsys, monkeypatch, args, token):
+    monkeypatch.chdir(tmp_path)  # a relative config path is looked up here
+    out = tmp_path / "run"
+    rc = main(["--out", str(out), *args])
+    cap = capsys.readouterr()
+    assert rc == 2
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("kite-eval: error: ")
+    assert token in lines[0]
+    assert cap.out == ""
+    assert list(tmp_path.iterdir()) == []  # neither the folder nor a temporary sibling
+
+
+def test_unknown_policy_lists_valid_ones(tmp_path, capsys):
+    assert main(["--policy", "ppo", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "'ppo'" in err and "valid: baseline" in err
+
+
+def test_out_is_a_file_or_missing(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert main(["--out", str(f)]) == 2
+    assert "not a folder" in capsys.readouterr().err
+    assert main([]) == 2  # --out is required
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_interrupt_leaves_nothing(tmp_path, capsys, monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(kite_env.flight, "fly", interrupted)
+    assert main(["--out", str(tmp_path / "run"), *SHORT]) == 130
+    assert list(tmp_path.iterdir()) == []
+    assert "interrupted" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def real_run(tmp_path_factory):
+    """One short real flight (0.3 s, warm-up 0.1 s) into a non-empty folder replaced with --force."""
+    base = tmp_path_factory.mktemp("eval")
+    out = base / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("previous results")
+    refused = main(["--out", str(out), *SHORT])  # non-empty: refused without --force, folder untouched
+    assert refused == 2 and (out / "old.txt").read_text() == "previous results"
+    rc = main(["--out", str(out), "--seed", "7", "--force", *SHORT])
+    return rc, base, out
+
+
+def test_real_flight_writes_everything(real_run):
+    rc, base, out = real_run
+    assert rc == 0
+    assert [p.name for p in base.iterdir()] == ["run"]  # no temporary or backup folder left
+    names = {p.name for p in out.iterdir()}
+    assert "old.txt" not in names
+    assert {"metrics.json", "config.yaml", "timeseries.npz", "timeseries.csv", "command.txt", *PNGS} <= names
+    for png in PNGS:
+        data = (out / png).read_bytes()
+        assert len(data) > 5000 and data[:8] == b"\x89PNG\r\n\x1a\n", png
+
+
+def test_real_flight_metrics_and_config(real_run):
+    _, _, out = real_run
+    metrics = json.loads((out / "metrics.json").read_text())
+    missing = [k for k in ISSUE_KEYS if k not in metrics]
+    assert not missing
+    assert metrics["policy"] == "baseline" and metrics["wind_seed"] == 7
+    assert metrics["crashed"] is False and metrics["termination_reason"] == "completed"
+    assert metrics["sim_time_s"] == pytest.approx(0.3)
+    assert metrics["metrics_window_start_s"] == pytest.approx(0.1)
+    assert metrics["tether_force_min_N"] <= metrics["tether_force_mean_N"] <= metrics["tether_force_max_N"]
+    assert metrics["tether_force_min_N"] > 0
+    cfg = yaml.safe_load((out / "config.yaml").read_text())
+    assert cfg["sim"]["duration_s"] == pytest.approx(0.3) and cfg["sim"]["warmup_s"] == pytest.approx(0.1)
+    assert cfg["wind"]["seed"] == 7
+    log = read_timeseries(out / "timeseries.npz")
+    t = log.series["t"]
+    assert t[-1] == pytest.approx(0.3) and np.all(np.diff(t) > 0)
+    assert log.meta["warmup_s"] == pytest.approx(0.1)
+    # the metrics agree with the stored series over the window t >= 0.1 s
+    win = t >= 0.1
+    assert metrics["tether_force_max_N"] == pytest.approx(log.series["tether_force"][win].max())
+    rows = (out / "timeseries.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + t.size and rows[0].startswith("t,")
+
+
+def test_crash_is_a_result_not_an_error(real_run, tmp_path, capsys, monkeypatch):
+    """A crashed flight: files written, crashed=true in metrics.json, a warning, exit 0 (progress bar and summary
+    on, the flight and the figures replaced by stand-ins to keep the test fast)."""
+    _, _, first = real_run
+    log = read_timeseries(first / "timeseries.npz")
+    log.meta.update(crashed=True, termination_reason="ground")
+
+    def crashed_flight(cfg, policy=None, duration_s=None, progress=None, wing=None):
+        for t in log.series["t"][::4]:
+            progress(float(t))
+        return log
+
+    monkeypatch.setattr(kite_env.flight, "fly", crashed_flight)
+    monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
+    out = tmp_path / "crash"
+    rc = main(["--out", str(out), "--duration", "0.3", "--set", "sim.warmup_s=0.1"])
+    cap = capsys.readouterr()
+    assert rc == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["crashed"] is True and metrics["termination_reason"] == "ground"
+    assert "kite-eval: warning:" in cap.err and "ground" in cap.err
+    assert "tether force min/mean/max" in cap.out and "traction (tether) force range" in cap.out
