@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# README main job (until the flight model lands): aeroelastic polar of the rhino16 kite at 25 m/s.
+# Aeroelastic polar of the rhino16 kite at 25 m/s (the wing on its own).
 # Extra arguments are passed to kite-polar (e.g. --kite v3 --out runs/polar_v3).
 set -euo pipefail
 cd "$(dirname "$0")/.."

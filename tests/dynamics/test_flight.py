@@ -87,3 +87,19 @@ def test_fly_logs_every_step_and_is_deterministic():
     # the kite starts at the crossing point and moves along the path
     assert a.series["path_distance"].max() < np.radians(1.0)
     assert a.series["path_s"][-1] > 0.0
+
+
+def test_pulling_the_right_steering_line_turns_right_and_more_with_more_input():
+    """Open loop, rest-length difference Delta L = L_B - L_D held for 0.75 s: a shorter right line (B) gives a
+    negative yaw rate about z_k (the nose, -x_k, turns towards +y_k: a right turn), growing with the input."""
+    rates = {}
+    for dL in (-0.05, -0.1, 0.1):
+        sim = FlightSimulator(Config(), UniformWind())
+        start(sim)
+        yaw = []
+        for _ in range(150):
+            rec = sim.step(sim.L_B0 + dL / 2, sim.L_D0 - dL / 2)
+            yaw.append((rec.R_wk.T @ rec.omega)[2])
+        rates[dL] = float(np.mean(yaw[-50:]))
+    assert rates[-0.05] < 0.0 and rates[-0.1] < 1.5 * rates[-0.05]  # right turn, about proportional to the input
+    assert rates[0.1] == pytest.approx(-rates[-0.1], rel=0.05)  # mirror input, mirror turn
