@@ -54,6 +54,8 @@ class StructureConfig:
 @dataclass(frozen=True)
 class AeroConfig:
     rho_kg_m3: float = 1.225  # air density, sea level (physics_facts 4.2) [kg/m^3]
+    # Eq. (9) M = 1/2 rho CM c^p w V^2: p = 2 dimensionally consistent (default); 1 = as printed in the paper
+    moment_chord_power: float = 2.0  # [-]
 
 
 @dataclass(frozen=True)
@@ -240,6 +242,8 @@ def _validate(cfg: Config) -> None:
                 raise ConfigError(f"config key '{key}' must be positive, got {v!r}")
             if key in _NON_NEGATIVE and not v >= 0:
                 raise ConfigError(f"config key '{key}' must be >= 0, got {v!r}")
+    if cfg.aero.moment_chord_power not in (1.0, 2.0):
+        raise ConfigError(f"config key 'aero.moment_chord_power' must be 1 or 2, got {cfg.aero.moment_chord_power}")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

@@ -254,7 +254,7 @@ class AeroelasticWing:
         return section_loads(
             state.x[sec], self.mesh.section_tube_d, self.mesh.section_width,
             flight.v_kite, flight.omega, flight.v_wind, self.cfg.aero.rho_kg_m3,
-            x_sec_prev=self._sec_prev if dt else None, dt=dt,
+            x_sec_prev=self._sec_prev if dt else None, dt=dt, moment_chord_power=self.cfg.aero.moment_chord_power,
         )
 
     def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
@@ -575,7 +575,8 @@ class _AeroLoad:
         w, fl = self.wing, self.flight
         _, J = load_jacobian(
             state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
-            w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt)
+            w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt,
+            moment_chord_power=w.cfg.aero.moment_chord_power)
         self.n_tangent += 1
         J = -self.scale * J
         if self.c_node > 0.0:

@@ -124,8 +124,8 @@ def _lei_coefficients(alpha, t, kappa, x_ref):
 
 
 @njit(**_JIT)
-def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, span, has_span,
-                         scal, vec, node, zeta, axes):
+def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
+                         has_span, scal, vec, node, zeta, axes):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
 
     Parameters
@@ -270,7 +270,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         kl = k * cl
         dr0, dr2 = kd * ux, kd * uz  # Eq. (8), along e_D = u_xz / V
         li0, li2 = -kl * uz, kl * ux  # Eq. (7), along e_L = e_D × e_y
-        moment = hcw * speed2 * c * cm  # Eq. (9), with c^2 (loads module docstring)
+        moment = hcw * speed2 * c ** (c_pow - 1.0) * cm  # Eq. (9), c^c_pow in all (loads module docstring)
         s_ref = x_ref * c - 0.5 * d
         vec[0, i, 0], vec[0, i, 1], vec[0, i, 2] = li0, 0.0, li2
         vec[1, i, 0], vec[1, i, 1], vec[1, i, 2] = dr0, 0.0, dr2
@@ -304,7 +304,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,
-                         x_ref_over_c=0.25, spanwise=None):
+                         x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0):
     """Fields of :class:`kite_env.aero.loads.SectionLoads` from the compiled kernel (same arguments as
     :func:`kite_env.aero.loads.section_loads`, Eq. 2-9).
 
@@ -352,7 +352,8 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
     axes = np.empty((n, 3, 3))
     section_loads_kernel(x, prev, has_prev, float(dt) if has_prev else 0.0, np.ascontiguousarray(d),
                          np.ascontiguousarray(w), np.ascontiguousarray(v_kite, dtype=float),
-                         np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c), span,
+                         np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c),
+                         float(moment_chord_power), span,
                          has_span, scal, vec, node, zeta, axes)
     alpha, cl, cd, cm, moment, s_ref, q_dyn, chord, t, kappa = scal
     lift, drag, v_app = vec

@@ -168,6 +168,7 @@ def section_loads(
     x_ref_over_c: float = X_REF_OVER_C_DEFAULT,
     spanwise: np.ndarray | None = None,
     backend: str = "auto",
+    moment_chord_power: float = 2.0,
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -198,6 +199,10 @@ def section_loads(
     backend : {"auto", "numba", "numpy"}
         ``"numpy"``: the reference code below; ``"numba"``: the compiled kernel of :mod:`kite_env.aero.kernels`
         (same results to round-off); ``"auto"``: see :func:`kite_env.structure.kernels.resolve_backend`.
+    moment_chord_power : float
+        Power of the chord in Eq. (9), ``M = 1/2 rho CM c^p w V^2``: 2 (default) is the dimensionally consistent
+        moment; 1 is the formula as printed in the paper (a moment per 1 m of reference length), kept for
+        sensitivity studies (module docstring).
 
     Returns
     -------
@@ -205,7 +210,7 @@ def section_loads(
     """
     if resolve_backend(backend) == "numba":
         return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
-                                                  x_ref_over_c, spanwise))
+                                                  x_ref_over_c, spanwise, moment_chord_power))
     x_sec = np.asarray(x_sec, dtype=float)
     geom = section_geometry(x_sec, tube_d, spanwise)
     v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt)
@@ -221,7 +226,7 @@ def section_loads(
     k = hcw * np.sqrt(speed2)
     drag_loc = (k * CD)[:, None] * u_loc  # Eq. (8)
     lift_loc = (k * CL)[:, None] * (u_loc @ _EY_CROSS.T)  # Eq. (7): (u_x, 0, u_z) -> (-u_z, 0, u_x)
-    moment = hcw * speed2 * c * CM  # Eq. (9), with c^2 (see module docstring)
+    moment = hcw * speed2 * c ** (moment_chord_power - 1.0) * CM  # Eq. (9), with c^2 by default (module docstring)
     s_ref = x_ref_over_c * c - 0.5 * geom.tube_d  # reference point along e_x from the LE node
     f_loc = distribute(geom.local, s_ref, lift_loc + drag_loc, moment)
     nodal = f_loc @ geom.frames.transpose(0, 2, 1)  # rows e_x, e_y, e_z: f = f_s e_x + f_z e_z
@@ -243,6 +248,7 @@ def load_jacobian(
     dt: float | None = None,
     x_ref_over_c: float = X_REF_OVER_C_DEFAULT,
     h: float = 1e-6,
+    moment_chord_power: float = 2.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
 
@@ -266,7 +272,8 @@ def load_jacobian(
     x_sec = np.asarray(x_sec, dtype=float)
     n_sec, m, _ = x_sec.shape
     p = 3 * m
-    base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c)
+    base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c,
+                         moment_chord_power=moment_chord_power)
     tan = spanwise_directions(x_sec[:, 0])
     # stack: copy q perturbs coordinate q (= 3 b + l) of every section
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
@@ -278,7 +285,8 @@ def load_jacobian(
     pert = section_loads(
         xs.reshape(p * n_sec, m, 3), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
         v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
-        None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan))
+        None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan),
+        moment_chord_power=moment_chord_power)
     df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
     return base.nodal_forces, df.transpose(1, 2, 0).copy()
 

@@ -233,3 +233,15 @@ def test_inconsistent_shapes_are_rejected():
     with pytest.raises(ValueError):
         section_loads(x, D, W, np.zeros(3), np.zeros(3), np.zeros(3), RHO, spanwise=np.ones((4, 3)),
                       backend="numba")
+
+
+def test_moment_as_printed_in_the_paper_scales_by_the_chord():
+    """Eq. (9) as printed (c^1) against the consistent c^2: same coefficients, moment divided by the chord, both
+    backends alike."""
+    x, kw = case_args(*CASES[0][1:])
+    a2 = section_loads(x, D, W, rho=RHO, backend="numpy", **kw)
+    a1, b1 = (section_loads(x, D, W, rho=RHO, backend=be, moment_chord_power=1.0, **kw) for be in ("numpy", "numba"))
+    np.testing.assert_allclose(a1.moment, a2.moment / a2.geometry.chord, rtol=1e-12)
+    np.testing.assert_allclose(b1.moment, a1.moment, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(b1.nodal_forces, a1.nodal_forces, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(a1.nodal_forces.sum(axis=1), a2.nodal_forces.sum(axis=1), rtol=1e-12, atol=1e-9)
