@@ -149,7 +149,7 @@ class StaticSolver:
         return hit
 
     def solve_damped(self, state: NodalState, fixed_dofs, du_fixed, load, tol_force: float, tol_disp: float,
-                     max_iter: int = 60, lam0: float = 1e-3, accept_force: float | None = None) -> StaticResult:
+                     max_iter: int = 60, lam0: float = 0.1, accept_force: float | None = None) -> StaticResult:
         """Levenberg-Marquardt-damped Newton for hard cases (a slack, luffing canopy): ``(T + lam D) du = r`` with
         ``D`` the diagonal of the tangent; a step that does not lower the residual norm is rejected and ``lam``
         grows (x4), an accepted one shrinks it (x0.3). Refactorises every iteration. Same convergence test and
@@ -184,7 +184,8 @@ class StaticSolver:
             last_du = history[-1][2] if history else np.inf
             if rnorm <= tol_force * scale and last_du <= tol_disp:
                 history.append((it, rnorm, 0.0))
-                return StaticResult(st, -r, it - 1, history, True, nfac)
+                self._store_factorization(kdata + load.tangent(st), sel, ind, ptr, free, key, load)
+                return StaticResult(st, -r, it - 1, history, True, nfac + 1)
             data = kdata + load.tangent(st)
             diag = np.abs(data[self.asm.diag_index])
             accepted_step = False
@@ -213,8 +214,23 @@ class StaticSolver:
             if not accepted_step:
                 break
         if accept_force is not None and best[0] <= accept_force:
-            return StaticResult(best[1], -best[2], max_iter, history, False, nfac, accepted=True)
+            _, k_b, _ = residual(best[1])
+            self._store_factorization(k_b + load.tangent(best[1]), sel, ind, ptr, free, key, load)
+            return StaticResult(best[1], -best[2], max_iter, history, False, nfac + 1, accepted=True)
         raise ConvergenceError(f"damped Newton did not converge in {len(history)} iterations", history)
+
+    def _store_factorization(self, data, sel, ind, ptr, free, key, load) -> None:
+        """Factorise the (undamped) tangent at a solution and keep it for later modified-Newton solves."""
+        Kff = sp.csc_matrix((data[sel], ind, ptr), shape=(free.size, free.size))
+        try:
+            self._lu = spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
+        except RuntimeError:
+            self._lu = None
+            return
+        self._lu_key = (key, getattr(load, "tangent_key", None))
+        self._lu_data = data
+        self._lu_free = free
+        self.n_factorizations += 1
 
     def condensed_tangent(self, dofs: np.ndarray) -> np.ndarray:
         """Stiffness ``d r_b / d q_b`` (len(dofs) square) of the reactions at the prescribed ``dofs`` with the free DOF
