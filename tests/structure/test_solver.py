@@ -259,3 +259,18 @@ def test_damped_newton_reaches_the_same_equilibrium(lam0):
     assert res.state.x[n, 0] - L == pytest.approx(P / (EA / L + k), rel=1e-8)
     if lam0 > 1:  # heavily damped start: more, shorter steps
         assert res.iterations > 2
+
+
+def test_banded_and_sparse_factorisations_give_the_same_solution():
+    """The LAPACK banded LU (narrow band: DOF numbered along the strip) and SuperLU solve the same Newton steps."""
+    X0, asm = cantilever(n=40)
+    f_ext = np.zeros(asm.n_dof)
+    f_ext[6 * 40 + 2] = 2.0  # large tip load: several Newton iterations
+    out = {}
+    for banded in (True, False):
+        solver = StaticSolver(asm, banded=banded)
+        out[banded] = solver.solve(NodalState.reference(X0), f_ext, fixed_dofs=np.arange(6))
+        kind = type(solver._lu).__name__
+        assert (kind == "_BandedLU") == banded
+    np.testing.assert_allclose(out[True].state.x, out[False].state.x, atol=1e-12)
+    assert out[True].iterations == out[False].iterations
