@@ -65,9 +65,6 @@ class FsiConfig:
     # a monolithic Newton solve that stalls (chattering between taut and slack canopy states) is accepted at its best
     # iterate when the force residual is below this fraction of the load, and flagged (WingSolution.accepted)
     accept_force_rel: float = 1.0e-2  # [-]
-    # viscous damping of every structural node over a time step, F = -c (x - x_prev) / dt: a stabilisation of the
-    # massless (quasi-static) structure, whose only damping in time is the section-average velocity of Eq. 3
-    node_damping_Ns_per_m: float = 0.0  # [N s/m]
     max_coupling_iter: int = 200  # [-]
     newton_per_coupling: int = 4  # Newton iterations between two aero load updates [-]
     max_bridle_step_m: float = 0.02  # larger bridle-point moves are applied in converged sub-steps [m]
@@ -152,7 +149,7 @@ _POSITIVE = {
 }
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "fsi.max_retries", "fsi.node_damping_Ns_per_m", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
+    "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s",
 }

@@ -554,7 +554,6 @@ class _AeroLoad:
         # factorisations of the coupled tangent are reused across calls of the same kind only: static or time step
         # (the deformation-velocity term scales with 1/dt; dt in 25 % buckets) and load scale
         self.tangent_key = (round(scale, 6), None if not dt else int(round(np.log(dt) / np.log(1.25))))
-        self.c_node = wing.cfg.fsi.node_damping_Ns_per_m if (dt and wing._sec_prev is not None) else 0.0
         self.loads = None
         self.collapsed = None
         self.n_force = 0
@@ -565,9 +564,6 @@ class _AeroLoad:
         self.loads = self.wing._aero(state, self.flight, self.dt)
         self.n_force += 1
         f = self.scale * self.loads.nodal_forces
-        if self.c_node > 0.0:
-            # nodal viscous damping of the massless structure over the time step (fsi.node_damping_Ns_per_m)
-            f = f - (self.c_node / self.dt) * (state.x[self.wing.mesh.sections] - self.wing._sec_prev)
         self.f_ext = np.bincount(self.wing._load_dofs, weights=f.ravel(), minlength=self.wing.n_dof)
         return self.f_ext
 
@@ -578,8 +574,4 @@ class _AeroLoad:
             w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt,
             moment_chord_power=w.cfg.aero.moment_chord_power)
         self.n_tangent += 1
-        J = -self.scale * J
-        if self.c_node > 0.0:
-            idx = np.arange(J.shape[1])
-            J[:, idx, idx] += self.c_node / self.dt
-        return self.asm.block_data(J)
+        return self.asm.block_data(-self.scale * J)

@@ -103,3 +103,20 @@ def test_pulling_the_right_steering_line_turns_right_and_more_with_more_input():
         rates[dL] = float(np.mean(yaw[-50:]))
     assert rates[-0.05] < 0.0 and rates[-0.1] < 1.5 * rates[-0.05]  # right turn, about proportional to the input
     assert rates[0.1] == pytest.approx(-rates[-0.1], rel=0.05)  # mirror input, mirror turn
+
+
+def test_predictor_corrector_coupling_agrees_with_the_explicit_one():
+    """The two ways of carrying the wing force over a step give the same straight flight to within the step's
+    coupling error (the corrector solves the wing twice per step)."""
+    out = {}
+    for coupling in ("explicit", "predictor_corrector"):
+        cfg = Config()
+        cfg = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, coupling=coupling))
+        sim = FlightSimulator(cfg, UniformWind())
+        start(sim)
+        for _ in range(30):
+            rec = sim.step(sim.L_B0, sim.L_D0)
+        out[coupling] = rec
+    a, b = out["explicit"], out["predictor_corrector"]
+    assert np.abs(a.state.r - b.state.r).max() < 2e-3
+    assert abs(a.tether_force - b.tether_force) < 0.02 * a.tether_force
