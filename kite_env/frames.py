@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product along the last axis (explicit components: np.cross costs ~10 us on 3-vectors)."""
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product along the last axis (explicit components; ``np.cross`` costs ~10 us on 3-vectors)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
@@ -37,7 +37,7 @@ def kite_frame(pos_a: np.ndarray, pos_b: np.ndarray, pos_c: np.ndarray, pos_d: n
     ex = 0.5 * (pos_b + pos_d) - origin
     ex = ex - np.sum(ex * ey, axis=-1, keepdims=True) * ey
     ex = ex / np.linalg.norm(ex, axis=-1, keepdims=True)
-    ez = _cross(ex, ey)
+    ez = cross(ex, ey)
     return origin, np.stack([ex, ey, ez], axis=-1)
 
 
@@ -72,6 +72,6 @@ def kite_frame_rates(pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.n
     xp = m - (m @ ey) * ey
     dxp = dm - ((dm @ ey) + (m @ dey)) * ey - (m @ ey) * dey
     dex = (dxp - ex * (ex @ dxp)) / np.linalg.norm(xp)
-    dez = _cross(dex, ey) + _cross(ex, dey)
-    omega = 0.5 * (_cross(ex, dex) + _cross(ey, dey) + _cross(ez, dez))
+    dez = cross(dex, ey) + cross(ex, dey)
+    omega = 0.5 * (cross(ex, dex) + cross(ey, dey) + cross(ez, dez))
     return origin, R, v_k, omega

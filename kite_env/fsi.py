@@ -346,15 +346,8 @@ class AeroelasticWing:
         fcfg = self.cfg.fsi
         b = self.bridle
         solver = self._mono_solvers[support]
-        if support == "prescribed":
-            fixed = (6 * b[:, None] + np.arange(3)[None, :]).ravel()
-            du_fixed = (q_b - state.x[b]).ravel()
-            n_outer = 1
-        else:
-            fixed = (6 * b[:, None] + np.array([0, 2])[None, :]).ravel()
-            du_fixed = (q_b - state.x[b])[:, [0, 2]].ravel()
-            self.lines.anchor[:] = self.kcu_position()
-            n_outer = fcfg.max_coupling_iter
+        fixed, du_fixed = self._support(state, q_b, support)
+        n_outer = 1 if support == "prescribed" else fcfg.max_coupling_iter
         load = _AeroLoad(self, solver.asm, flight, dt, scale)
         if support == "lines" and not history:
             # first guess of the line tensions: the aerodynamic force shared by the four lines
@@ -385,46 +378,23 @@ class AeroelasticWing:
             history.append(entry)
             if support == "prescribed":
                 break
-            fi_b = fi_b - self.lines.internal(state.x[b][:, None, :], None)[0][:, :3]
-            F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]
-            e_in = self.lines.anchor - state.x[b]
-            e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
-            T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
-            entry["dT_rel"] = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
-            self.lines.tension[:] = T_new
+            fi_b = self._without_lines(state, fi_b)
+            entry["dT_rel"] = self._update_line_tensions(state, fi_b - f_ext.reshape(-1, 6)[b, :3])
             if entry["dT_rel"] < fcfg.tol_force_rel:
                 break
         else:
             raise WingConvergenceError(
                 f"bridle-line tensions did not converge in {n_outer} monolithic solves "
                 f"(tol_force_rel={fcfg.tol_force_rel})", history)
-        loads = load.loads
-        F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]  # F_b = F_i^b - F_a^b (Eq. 1, second block)
-        tot = wing_totals(loads, flight.v_kite - flight.v_wind)
-        sol = WingSolution(
-            F_b=F_b, nodes=state.x.copy(), alpha=loads.alpha, CL=loads.CL, CD=loads.CD, CM=loads.CM,
-            aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
-            coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=sum(
-                h.get("newton_iters", 0) for h in history if "iter" in h),
-            accepted=any(h.get("accepted", False) for h in history),
-            tube_collapsed=load.collapsed, section_forces=scale * loads.nodal_forces,
-            section_lift=scale * np.linalg.norm(loads.lift_local, axis=1),
-            section_drag=scale * np.linalg.norm(loads.drag_local, axis=1),
-        )
-        return state, sol
+        newton = sum(h.get("newton_iters", 0) for h in history if "iter" in h)
+        return state, self._solution(state, load.loads, fi_b - f_ext.reshape(-1, 6)[b, :3], flight, scale, history,
+                                     newton, load.collapsed, any(h.get("accepted", False) for h in history))
 
     def _couple(self, state, q_b, flight, dt, support, scale, history):
         fcfg = self.cfg.fsi
         b = self.bridle
-        if support == "prescribed":
-            fixed = (6 * b[:, None] + np.arange(3)[None, :]).ravel()
-            du_fixed = (q_b - state.x[b]).ravel()
-            solver = self.solver
-        else:
-            fixed = (6 * b[:, None] + np.array([0, 2])[None, :]).ravel()
-            du_fixed = (q_b - state.x[b])[:, [0, 2]].ravel()
-            solver = self._lines_solver
-            self.lines.anchor[:] = self.kcu_position()
+        fixed, du_fixed = self._support(state, q_b, support)
+        solver = self.solver if support == "prescribed" else self._lines_solver
         f_prev = None
         newton_total = 0
         collapsed = None
@@ -476,14 +446,8 @@ class AeroelasticWing:
             # the bridle-line elements: no extra assembly
             fi_b = (res.reactions + f_ext).reshape(-1, 6)[b, :3]
             if support == "lines":
-                fi_b = fi_b - self.lines.internal(state.x[b][:, None, :], None)[0][:, :3]
-                # line tension T = pull of the wing along its line (Eq. 1, second block, projected on the line)
-                F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]
-                e_in = self.lines.anchor - state.x[b]
-                e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
-                T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
-                entry["dT_rel"] = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
-                self.lines.tension[:] = T_new
+                fi_b = self._without_lines(state, fi_b)
+                entry["dT_rel"] = self._update_line_tensions(state, fi_b - f_ext.reshape(-1, 6)[b, :3])
             history.append(entry)
             if not np.isfinite(dx):
                 raise WingConvergenceError("non-finite displacement in the coupling loop", history)
@@ -498,18 +462,44 @@ class AeroelasticWing:
         # final aero loads on the converged shape and reactions F_b (second block of Eq. 1)
         loads = self._aero(state, flight, dt)
         f_ext = self._load_vector(loads, scale)
-        F_b = fi_b - f_ext.reshape(-1, 6)[b, :3]  # F_b = F_i^b - F_a^b (Eq. 1, second block)
-        v_ref = flight.v_kite - flight.v_wind
-        tot = wing_totals(loads, v_ref)
-        sol = WingSolution(
+        return state, self._solution(state, loads, fi_b - f_ext.reshape(-1, 6)[b, :3], flight, scale, history,
+                                     newton_total, collapsed)
+
+    # ------------------------------------------------------------------ shared by both couplings
+    def _support(self, state, q_b, support):
+        """Prescribed DOF and their increments from ``state``: all translations of A-D (``"prescribed"``) or only
+        their x_k and z_k (``"lines"``, which also places the line anchor at the KCU)."""
+        b = self.bridle
+        comp = np.arange(3) if support == "prescribed" else np.array([0, 2])
+        if support == "lines":
+            self.lines.anchor[:] = self.kcu_position()
+        return (6 * b[:, None] + comp[None, :]).ravel(), (q_b - state.x[b])[:, comp].ravel()
+
+    def _without_lines(self, state, fi_b):
+        """Internal force at A-D (4, 3) without the bridle-line elements of ``support="lines"``."""
+        return fi_b - self.lines.internal(state.x[self.bridle][:, None, :], None)[0][:, :3]
+
+    def _update_line_tensions(self, state, F_b) -> float:
+        """Line tension T = pull of the wing along its line (Eq. 1, second block, projected on the line); sets the
+        new tensions and returns their largest change relative to the largest tension."""
+        e_in = self.lines.anchor - state.x[self.bridle]
+        e_in /= np.linalg.norm(e_in, axis=1, keepdims=True)
+        T_new = np.maximum(np.einsum("ij,ij->i", F_b, e_in), 1.0)
+        d_rel = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
+        self.lines.tension[:] = T_new
+        return d_rel
+
+    def _solution(self, state, loads, F_b, flight, scale, history, newton_iters, collapsed, accepted=False):
+        """WingSolution of a converged shape; ``F_b = F_i^b - F_a^b`` (Eq. 1, second block)."""
+        tot = wing_totals(loads, flight.v_kite - flight.v_wind)
+        return WingSolution(
             F_b=F_b, nodes=state.x.copy(), alpha=loads.alpha, CL=loads.CL, CD=loads.CD, CM=loads.CM,
             aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],
-            coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=newton_total,
+            coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=newton_iters, accepted=accepted,
             tube_collapsed=collapsed, section_forces=scale * loads.nodal_forces,
             section_lift=scale * np.linalg.norm(loads.lift_local, axis=1),
             section_drag=scale * np.linalg.norm(loads.drag_local, axis=1),
         )
-        return state, sol
 
 
 class BridleLines:
@@ -563,8 +553,7 @@ class _AeroLoad:
         self.collapsed = self.wing._update_tube_stiffness(state)
         self.loads = self.wing._aero(state, self.flight, self.dt)
         self.n_force += 1
-        f = self.scale * self.loads.nodal_forces
-        self.f_ext = np.bincount(self.wing._load_dofs, weights=f.ravel(), minlength=self.wing.n_dof)
+        self.f_ext = self.wing._load_vector(self.loads, self.scale)
         return self.f_ext
 
     def tangent(self, state: NodalState) -> np.ndarray:

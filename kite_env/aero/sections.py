@@ -43,12 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product along the last axis (explicit components; faster than ``np.cross`` for small arrays)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+from kite_env.frames import cross  # noqa: F401  (re-exported: used here and by kite_env.aero.loads)
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

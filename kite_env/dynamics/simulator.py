@@ -18,15 +18,15 @@ reproducible bit for bit and the wing's warm start sees equal steps.
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from kite_env.config import Config
 from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
-from kite_env.frames import kite_frame_rates
+from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
+from kite_env.structure.rotations import expm
 
 
 class SimulationError(RuntimeError):
@@ -52,13 +52,6 @@ class StepRecord:
     line_length: np.ndarray  # (4,) [m]
     tether_force: float  # [N], constraint force of the tether
     constraint_drift: np.ndarray  # (3,) [m] before the projection
-    extra: dict = field(default_factory=dict)
-
-
-def _rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
-    axis = axis / np.linalg.norm(axis)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
 
 
 class FlightSimulator:
@@ -142,7 +135,7 @@ class FlightSimulator:
         h = np.sqrt(max(L_pow**2 - a[1] ** 2 - (kcu[0] - a[0]) ** 2, 1.0))
         kcu = np.array([kcu[0], 0.0, a[2] - h])
         theta = np.arctan2(-kcu[0], -kcu[2])
-        R_wk = _rotation_about(yp, theta) @ R_base
+        R_wk = expm(theta * yp) @ R_base  # rotation by theta about the unit vector y'
         r_kcu = cfg.dynamics.tether_length_m * R0
         origin = r_kcu - R_wk @ kcu
         r = np.vstack([origin + q0 @ R_wk.T, r_kcu[None, :]])
@@ -160,19 +153,24 @@ class FlightSimulator:
         return self._solve_wing(first=True)
 
     # ------------------------------------------------------------------ stepping
-    def _solve_wing(self, first: bool = False, commit: bool = True) -> StepRecord:
-        st = self.state
-        origin, R, v_k, omega, v_w, X, q_b = self._flight_state(self.t, st)
+    def _solve_wing(self, first: bool = False, commit: bool = True, state: ParticleState | None = None,
+                    t: float | None = None) -> StepRecord:
+        """Wing at the particle ``state`` and time ``t`` (default: the current ones). With ``commit`` the solution
+        is the wing's new warm start and Eq. 3 reference, and its force is held over the next step."""
+        st = self.state if state is None else state
+        t = self.t if t is None else t
+        origin, R, v_k, omega, v_w, X, q_b = self._flight_state(t, st)
         try:
             sol = self.wing.solve(q_b, X, dt=None if first else self.dt, support="prescribed", warm=True,
                                   commit=commit)
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
-        self._F_k_K = -sol.F_b
-        self._q_b_K = q_b
-        self._K_b = self.wing.bridle_stiffness()
+        if commit:
+            self._F_k_K = -sol.F_b
+            self._q_b_K = q_b
+            self._K_b = self.wing.bridle_stiffness()
         T, l = self.particles.line_forces(st.r, st.v)
-        return StepRecord(t=self.t, state=st.copy(), wing=sol, R_wk=R, v_kite=v_k, omega=omega, v_wind=v_w,
+        return StepRecord(t=t, state=st.copy(), wing=sol, R_wk=R, v_kite=v_k, omega=omega, v_wind=v_w,
                           line_tension=T, line_length=l, tether_force=float("nan"), constraint_drift=np.zeros(3))
 
     def _rhs(self, t: float, r: np.ndarray, v: np.ndarray, frac: float = 0.0):
@@ -217,11 +215,8 @@ class FlightSimulator:
         if self.cfg.dynamics.coupling == "predictor_corrector":
             # predictor: wing at the end of the explicit step (not committed); corrector: the step again with the
             # wing force interpolated between both ends (a trapezoidal coupling of the wing force)
-            F_n, q_n, K_n = self._F_k_K, self._q_b_K, self._K_b
-            self.state, self.t = ParticleState(r, v), t + dt
-            pred = self._solve_wing(commit=False)
+            pred = self._solve_wing(commit=False, state=ParticleState(r, v), t=t + dt)
             self._F_end_K = -pred.wing.F_b
-            self._F_k_K, self._q_b_K, self._K_b = F_n, q_n, K_n
             r, v, lam, drift = self._rk4(t, r0, v0)
             self._F_end_K = None
         self.state = ParticleState(r, v)
@@ -235,8 +230,6 @@ class FlightSimulator:
 
 
 def _frame(r: np.ndarray):
-    from kite_env.frames import kite_frame
-
     return kite_frame(r[A], r[B], r[C], r[D])
 
 

@@ -166,6 +166,15 @@ def test_stiff_members_converge_at_round_off_floor():
     assert -(res.state.x[-1, 2]) == pytest.approx(0.30172, abs=5e-5)
 
 
+def spring_bar(n, L, EA):
+    """Straight bar of n beams along x with the tip node n as an extra block (for a configuration-dependent load)."""
+    X0 = np.zeros((n + 1, 3))
+    X0[:, 0] = np.linspace(0.0, L, n + 1)
+    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
+    return X0, Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+
+
 class _TipSpringLoad:
     """Displacement-dependent tip load f_x = P - k (x_tip - x_tip0): a load with a stiffness of its own."""
 
@@ -187,11 +196,7 @@ class _TipSpringLoad:
 
 def test_configuration_dependent_load_with_its_tangent():
     n, L, EA = 6, 1.0, 1e4
-    X0 = np.zeros((n + 1, 3))
-    X0[:, 0] = np.linspace(0.0, L, n + 1)
-    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
-    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
-    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+    X0, asm = spring_bar(n, L, EA)
     # the extra block is part of the pattern and block_data puts its entries at (6 n + a, 6 n + b)
     dense = asm.matrix(asm.block_data(np.arange(9.0).reshape(1, 3, 3))).toarray()
     assert np.array_equal(dense[6 * n:6 * n + 3, 6 * n:6 * n + 3], np.arange(9.0).reshape(3, 3))
@@ -215,11 +220,7 @@ def test_stalled_newton_is_accepted_only_within_accept_force():
     """A tangent that is off by a constant factor converges linearly; with too few iterations the solve raises,
     unless the best iterate is within ``accept_force``, which is then returned and flagged."""
     n, L, EA = 4, 1.0, 1e4
-    X0 = np.zeros((n + 1, 3))
-    X0[:, 0] = np.linspace(0.0, L, n + 1)
-    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
-    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
-    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+    X0, asm = spring_bar(n, L, EA)
 
     class HalfTangent(_TipSpringLoad):
         def tangent(self, st):
@@ -246,11 +247,7 @@ def test_stalled_newton_is_accepted_only_within_accept_force():
 def test_damped_newton_reaches_the_same_equilibrium(lam0):
     """Levenberg-Marquardt damping changes the path, not the solution (spring-loaded bar, analytic answer)."""
     n, L, EA = 4, 1.0, 1e4
-    X0 = np.zeros((n + 1, 3))
-    X0[:, 0] = np.linspace(0.0, L, n + 1)
-    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
-    bs = BeamSet(conn, X0, [0.0, 0.0, 1.0], EA=EA, EI2=1.0, EI3=1.0, GJ=0.8)
-    asm = Assembler(n + 1, [bs], extra_blocks=np.array([[n]]))
+    X0, asm = spring_bar(n, L, EA)
     P, k = 50.0, 3.0 * EA / L
     res = StaticSolver(asm).solve_damped(NodalState.reference(X0), np.arange(6), np.zeros(6),
                                          _TipSpringLoad(asm, n, P, k, L), tol_force=1e-10, tol_disp=1e-12,
