@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.linalg import lapack as _lapack
 
 from .assembly import DOF_PER_NODE, Assembler
 from .rotations import expm
@@ -48,16 +49,13 @@ class _BandedLU:
     SuperLU's (1-D or 2-D right-hand sides)."""
 
     def __init__(self, ab: np.ndarray, bw: int):
-        from scipy.linalg import lapack
-
-        self._lapack = lapack
         self.bw = bw
-        self.lu, self.piv, info = lapack.dgbtrf(ab, bw, bw, overwrite_ab=True)
+        self.lu, self.piv, info = _lapack.dgbtrf(ab, bw, bw, overwrite_ab=True)
         if info != 0:
             raise RuntimeError(f"banded LU: singular matrix (dgbtrf info = {info})")
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        x, info = self._lapack.dgbtrs(self.lu, self.bw, self.bw, rhs, self.piv)
+        x, info = _lapack.dgbtrs(self.lu, self.bw, self.bw, rhs, self.piv)
         if info != 0:
             raise RuntimeError(f"banded LU solve failed (dgbtrs info = {info})")
         return x

@@ -271,3 +271,20 @@ def test_banded_and_sparse_factorisations_give_the_same_solution():
         assert (kind == "_BandedLU") == banded
     np.testing.assert_allclose(out[True].state.x, out[False].state.x, atol=1e-12)
     assert out[True].iterations == out[False].iterations
+
+
+def test_a_solver_with_a_banded_factorisation_deep_copies_and_pickles():
+    """Snapshots of a running simulation (copy.deepcopy, pickling for worker processes) need the kept LU to copy:
+    the copy solves like the original."""
+    import copy
+    import pickle
+
+    X0, asm = cantilever(n=40)
+    f_ext = np.zeros(asm.n_dof)
+    f_ext[6 * 40 + 2] = 2.0
+    solver = StaticSolver(asm, banded=True)
+    solver.solve(NodalState.reference(X0), f_ext, fixed_dofs=np.arange(6))
+    assert type(solver._lu).__name__ == "_BandedLU"
+    rhs = np.linspace(0.0, 1.0, len(solver._lu_free))
+    for clone in (copy.deepcopy(solver), pickle.loads(pickle.dumps(solver))):
+        np.testing.assert_array_equal(clone._lu.solve(rhs), solver._lu.solve(rhs))
