@@ -52,6 +52,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from kite_env.frames import cross
+
 _TWO_PI = 2.0 * math.pi
 _HINT_WINDOW = 0.6  # half width of the search window around s_hint [rad of s]
 
@@ -105,7 +107,7 @@ def sphere_basis(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sp = np.where(safe, R[..., 1] / h_safe, 0.0)
     sb = R[..., 2]
     x_s = np.stack([-sb * cp, -sb * sp, h], axis=-1)
-    y_s = np.cross(R, x_s)
+    y_s = cross(R, x_s)
     return x_s, y_s
 
 
@@ -121,6 +123,19 @@ def heading_angle(r: np.ndarray, v: np.ndarray) -> np.ndarray | float:
     -------
     (...) float [rad]: 0 towards the zenith, +pi/2 towards decreasing azimuth, -pi/2 towards increasing azimuth.
     """
+    if np.ndim(r) == 1 and np.ndim(v) == 1:  # one vector: the same formulas in plain floats (~20x faster)
+        rx, ry, rz = (float(c) for c in r)
+        vx, vy, vz = (float(c) for c in v)
+        n = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if n == 0.0:
+            raise ValueError("cannot project the origin onto the unit sphere")
+        rx, ry, rz = rx / n, ry / n, rz / n
+        h = math.hypot(rx, ry)
+        cp, sp = (rx / h, ry / h) if h > 0.0 else (1.0, 0.0)
+        xs0, xs1, xs2 = -rz * cp, -rz * sp, h
+        ys0, ys1, ys2 = ry * xs2 - rz * xs1, rz * xs0 - rx * xs2, rx * xs1 - ry * xs0
+        psi = math.atan2(vx * ys0 + vy * ys1 + vz * ys2, vx * xs0 + vy * xs1 + vz * xs2)
+        return math.pi if psi <= -math.pi else psi
     x_s, y_s = sphere_basis(r)
     v = np.asarray(v, dtype=float)
     return wrap_angle(np.arctan2(np.sum(v * y_s, axis=-1), np.sum(v * x_s, axis=-1)))

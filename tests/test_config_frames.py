@@ -76,3 +76,18 @@ def test_kite_frame_rates_match_finite_differences():
     vel_rigid = np.cross(omega0, pos - o) + np.array([1.0, 2.0, 3.0])
     np.testing.assert_allclose(kite_frame_rates(pos, vel_rigid)[3], omega0, atol=1e-12)
     assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) > 0 and np.allclose(expm(np.zeros(3)), np.eye(3))
+
+
+def test_kite_frame_rates_in_floats_equal_the_array_formulas():
+    """The plain-float implementation used per time step gives the array implementation's frame and rates."""
+    from kite_env.frames import _kite_frame_rates_arrays, kite_frame_rates
+
+    rng = np.random.default_rng(5)
+    base = np.array([[0.5, 4.0, 0.0], [1.5, 3.9, 0.2], [0.5, -4.0, 0.0], [1.5, -3.9, 0.1]])
+    for _ in range(50):
+        pos = base + 0.3 * rng.normal(size=(4, 3))
+        vel = 10.0 * rng.normal(size=(4, 3))
+        for a, b in zip(kite_frame_rates(pos, vel), _kite_frame_rates_arrays(pos, vel)):
+            np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-12)
+    with pytest.raises(ValueError, match=r"\(4, 3\)"):
+        kite_frame_rates(base[:3], base[:3])

@@ -239,3 +239,16 @@ def test_config_validation(kwargs, match):
 def test_unreachable_height_is_reported():
     with pytest.raises(ValueError, match="not reachable"):
         Lemniscate(TrajectoryConfig(width_deg=40.0, height_deg=30.0, elevation_deg=30.0))
+
+
+def test_heading_of_one_vector_equals_the_vectorised_formula():
+    """The plain-float path for single vectors gives the array path's angles, at the zenith too."""
+    rng = np.random.default_rng(3)
+    r = rng.normal(size=(500, 3))
+    v = rng.normal(size=(500, 3))
+    r[0], v[0] = [0.0, 0.0, 7.0], [1.0, 0.5, 0.0]  # zenith: the documented fallback basis
+    r[1], v[1] = [3.0, 0.0, 1.0], [0.0, 0.0, -1.0]  # heading exactly pi (flying down)
+    one = np.array([heading_angle(ri, vi) for ri, vi in zip(r, v)])
+    np.testing.assert_allclose(one, heading_angle(r, v), rtol=0, atol=1e-14)
+    assert one[1] == pytest.approx(np.pi)
+    assert isinstance(heading_angle(r[2], v[2]), float)

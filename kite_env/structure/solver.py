@@ -153,6 +153,7 @@ class StaticSolver:
         self._lu_key = None
         self._diag_max = 0.0  # largest |K_ii| of the last assembled tangent (round-off floor of the residual)
         self._band_cache: dict = {}  # per set of prescribed DOF: banded-storage map or (None, None, None)
+        self._condense_cache: dict = {}  # per (prescribed, free) DOF: data positions of the condensation blocks
         self.banded = banded
         self._lu_data = None  # tangent (pattern data, incl. load tangent) of the current factorisation
         self._lu_free = None
@@ -262,11 +263,17 @@ class StaticSolver:
         if self._lu is None:
             raise RuntimeError("condensed_tangent needs a factorisation (call solve first)")
         dofs = np.asarray(dofs, dtype=np.int64)
-        T = self.asm.matrix(self._lu_data).tocsr()
         free = self._lu_free
-        T_fb = T[free][:, dofs].toarray()
-        T_bf = T[dofs][:, free]
-        T_bb = T[dofs][:, dofs].toarray()
+        key = (dofs.tobytes(), free.tobytes())
+        blocks = self._condense_cache.get(key)
+        if blocks is None:
+            # positions in the tangent's data array of the three blocks (-1: structural zero), built once
+            idx = self.asm.matrix(np.arange(1, self.asm.nnz + 1, dtype=float)).tocsr()
+            blocks = tuple(idx[rows][:, cols].toarray().astype(np.int64) - 1
+                           for rows, cols in ((dofs, dofs), (free, dofs), (dofs, free)))
+            self._condense_cache[key] = blocks
+        data = np.append(self._lu_data, 0.0)  # index -1 reads the appended zero
+        T_bb, T_fb, T_bf = (data[b] for b in blocks)
         return T_bb - T_bf @ self._lu.solve(T_fb)
 
     def _factorize(self, data, sel, ind, ptr, free, key):

@@ -288,3 +288,17 @@ def test_a_solver_with_a_banded_factorisation_deep_copies_and_pickles():
     rhs = np.linspace(0.0, 1.0, len(solver._lu_free))
     for clone in (copy.deepcopy(solver), pickle.loads(pickle.dumps(solver))):
         np.testing.assert_array_equal(clone._lu.solve(rhs), solver._lu.solve(rhs))
+
+
+def test_condensed_tangent_of_a_cantilever_tip_is_the_analytic_tip_stiffness():
+    """Tip translations prescribed, tip rotations free: the condensed stiffness of a clamped beam is
+    diag(EA/L, 3EI/L^3, 3EI/L^3) (linear range: a 1 nm prescribed move); twice (the cached block positions)."""
+    n, L, EA, EI = 20, 1.0, 1e4, 1.0
+    X0, asm = cantilever(n=n, L=L, EA=EA, EI=EI)
+    tip = 6 * n + np.arange(3)
+    solver = StaticSolver(asm)
+    for _ in range(2):
+        solver.solve(NodalState.reference(X0), np.zeros(asm.n_dof), fixed_dofs=np.r_[np.arange(6), tip],
+                     du_fixed=np.r_[np.zeros(6), 0.0, -1e-9, 1e-9])  # linear range
+        K = solver.condensed_tangent(tip)
+        np.testing.assert_allclose(K, np.diag([EA / L, 3 * EI / L**3, 3 * EI / L**3]), rtol=1e-6, atol=1e-4)
