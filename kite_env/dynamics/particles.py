@@ -88,6 +88,16 @@ class ParticleSystem:
             raise ValueError(f"steering-line rest lengths must be positive and finite, got {L_B!r}, {L_D!r}")
         self.rest[1], self.rest[3] = L_B, L_D
 
+    def kernel_parameters(self) -> tuple:
+        """Parameters of the compiled right-hand side :func:`kite_env.dynamics.kernels.particle_accelerations`, in
+        its argument order after ``K_b``: ``m (5,), rest (4,), k_c, c_c, rho, line_cd, line_diameter,
+        tether_diameter, tether_length, tip_lengths (2,), pair_damping (4,), gravity, alpha`` (SI units)."""
+        cfg = self.cfg
+        return (self.m, self.rest, float(cfg.line_stiffness_N_per_m), float(cfg.line_damping_Ns_per_m), self.rho,
+                float(cfg.line_cd), float(cfg.line_diameter_m), float(cfg.tether_diameter_m),
+                float(cfg.tether_length_m), self.tip_lengths, self.pair_damping, float(cfg.gravity_mps2),
+                float(cfg.baumgarte_1_per_s))
+
     # ------------------------------------------------------------------ forces
     def line_forces(self, r: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bridle-line tensions ``F_c`` (4,) [N] (Eq. 10, >= 0) and current lengths (4,) [m]."""

@@ -23,9 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.config import Config
+from kite_env.dynamics.kernels import particle_accelerations
 from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
 from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
+from kite_env.structure.kernels import resolve_backend
 from kite_env.structure.rotations import expm
 
 
@@ -63,13 +65,19 @@ class FlightSimulator:
     wind : object with ``velocity(t, r) -> (n, 3)`` in W
     wing : AeroelasticWing, optional
         Built from ``cfg.kite`` when not given.
+    backend : {"auto", "numba", "numpy"}
+        Right-hand side of the particle system (:meth:`_rhs`): ``"numpy"`` the reference
+        (:class:`~kite_env.dynamics.particles.ParticleSystem`), ``"numba"`` the compiled kernel
+        :func:`kite_env.dynamics.kernels.particle_accelerations` (same results to round-off); ``"auto"``: see
+        :func:`kite_env.structure.kernels.resolve_backend`.
     """
 
-    def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None):
+    def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None, backend: str = "auto"):
         from kite_env.polar import nominal_wing
 
         self.cfg = cfg
         self.wind = wind
+        self.backend = resolve_backend(backend)
         self.wing = wing if wing is not None else nominal_wing(cfg.kite.name, cfg)
         self.dt = cfg.dynamics.dt_s
         q0 = self.wing.design_bridle
@@ -174,6 +182,15 @@ class FlightSimulator:
                           line_tension=T, line_length=l, tether_force=float("nan"), constraint_drift=np.zeros(3))
 
     def _rhs(self, t: float, r: np.ndarray, v: np.ndarray, frac: float = 0.0):
+        """Velocities ``v``, constrained accelerations ``a`` (5, 3) and multipliers ``lam`` (3,) at ``t``, with the wing
+        force of the step (``frac``: fraction of the step, used by the predictor-corrector interpolation)."""
+        if self.backend == "numba":
+            interpolate = self._F_end_K is not None
+            wind = np.asarray(self.wind.velocity(t, r), dtype=float)
+            a, lam = particle_accelerations(r, v, wind, self._F_k_K, self._F_end_K if interpolate else self._F_k_K,
+                                            float(frac), interpolate, self._q_b_K, self._K_b,
+                                            *self.particles.kernel_parameters())
+            return v, a, lam
         origin, R = _frame(r)
         if self._F_end_K is not None:
             # corrector: the wing force interpolated in time between the solutions at both ends of the step

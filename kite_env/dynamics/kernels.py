@@ -1,0 +1,300 @@
+"""Compiled (numba) right-hand side of the particle system: wing force, applied forces and constrained accelerations.
+
+:func:`particle_accelerations` computes what :meth:`kite_env.dynamics.simulator.FlightSimulator._rhs` computes with
+the NumPy reference (:func:`kite_env.frames.kite_frame`, the wing force held in frame K,
+:meth:`kite_env.dynamics.particles.ParticleSystem.forces` and
+:meth:`~kite_env.dynamics.particles.ParticleSystem.accelerations`), term by term and in the same order, as scalar
+loops over the five masses, four bridle lines and four damped pairs. The wind at the masses is evaluated in Python
+by the caller (the wind model is arbitrary Python) and passed in. The results agree with NumPy to round-off
+(``tests/dynamics/test_particle_kernel.py``: 1e-12 relative); the remaining differences come from the summation
+order of the small matrix products (BLAS in the reference, left-to-right sums here). The formulas are documented
+in the reference modules and not repeated here; comments name the reference quantity (and the paper's equation)
+that each block computes.
+
+Why: the reference ``_rhs`` costs ~0.43 ms per call on the shared 2-core development container, almost all NumPy
+call overhead on (5, 3) arrays, and it is called four times per RK4 step (twice as often with the predictor-corrector
+coupling). With the kernel a call costs ~10 us (best of repeats, uniform wind): ~5 us the kernel call, mostly
+numba's dispatch of its 22 arguments, ~2 us the wind model, the rest Python. The first process after a change of
+this file compiles (~5 s); later processes load the cache from ``__pycache__``.
+
+Backend selection is done by :class:`kite_env.dynamics.simulator.FlightSimulator` (``backend="auto" | "numba" |
+"numpy"``, resolved by :func:`kite_env.structure.kernels.resolve_backend`: environment variable
+``KITE_ENV_ELEMENT_BACKEND``, else numba when importable). Without numba the kernel below runs as plain Python
+(correct, slow).
+
+Implementation rules (as :mod:`kite_env.structure.kernels`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
+no array views, scalar indexing only. ``error_model="numpy"``: a division by zero (a degenerate geometry, a line of
+zero length) gives ``inf``/``nan`` as in the reference, which the simulator then reports as a non-finite state,
+instead of raising ``ZeroDivisionError``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from kite_env.structure.kernels import njit
+
+_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
+
+# row indices of the state arrays (particles.A ... KCU; literals because numba's cache is keyed on this file only)
+_A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
+
+
+@njit(**_JIT)
+def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho, line_cd,
+                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha):
+    """Constrained accelerations of A, B, C, D, KCU and the constraint multipliers (``FlightSimulator._rhs``).
+
+    Parameters
+    ----------
+    r, v : (5, 3) float [m], [m/s]
+        Positions and velocities of A, B, C, D, KCU in W.
+    wind : (5, 3) float [m/s]
+        Wind velocity at the masses in W.
+    F0_K, F1_K : (4, 3) float [N]
+        Wing force ``F_k = -F_b`` on A-D in frame K at the start (``F0_K``) and at the end (``F1_K``) of the step;
+        ``F1_K`` is used only with ``interpolate``.
+    frac : float [-]
+        Fraction of the step (interpolation only).
+    interpolate : bool
+        True: ``F_K = F0_K + frac (F1_K - F0_K)`` (predictor-corrector). False: ``F_K = F0_K - K_b dq`` with the
+        move ``dq`` of the bridle points in K since the wing solution (explicit coupling, condensed stiffness).
+    q_b_K : (4, 3) float [m]
+        Bridle-point positions in K of the wing solution.
+    K_b : (12, 12) float [N/m]
+        Condensed wing stiffness ``dF_b/dq_b`` (A, B, C, D x, y, z in K).
+    m : (5,) float [kg]
+    rest : (4,) float [m]
+        Rest lengths L_A, L_B, L_C, L_D of the bridle lines.
+    k_c, c_c : float [N/m], [N s/m]
+        Bridle-line stiffness and damping (Eq. 10).
+    rho, line_cd, line_diameter, tether_diameter : float [kg/m^3], [-], [m], [m]
+        Line drag (Eq. 11); the tether drag is applied only with ``tether_diameter > 0``.
+    tether_length : float [m]
+    tip_lengths : (2,) float [m]
+        Constrained distances A-B and C-D.
+    pair_damping : (4,) float [N s/m]
+        Dashpots along A-C, B-D, A-D, B-C (``particles.DAMPED_PAIRS``).
+    gravity, alpha : float [m/s^2], [1/s]
+        Gravity and the Baumgarte rate of the constraints.
+
+    Returns
+    -------
+    a : (5, 3) float [m/s^2]
+    lam : (3,) float
+        Lagrange multipliers of the tether, A-B and C-D constraints (``M a = f + G^T lam``).
+    """
+    # ---------------------------------------------------------------- frame K from A-D (frames.kite_frame)
+    ox = 0.5 * (r[_A, 0] + r[_C, 0])
+    oy = 0.5 * (r[_A, 1] + r[_C, 1])
+    oz = 0.5 * (r[_A, 2] + r[_C, 2])
+    y0 = r[_A, 0] - r[_C, 0]
+    y1 = r[_A, 1] - r[_C, 1]
+    y2 = r[_A, 2] - r[_C, 2]
+    n = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    y0, y1, y2 = y0 / n, y1 / n, y2 / n
+    x0 = 0.5 * (r[_B, 0] + r[_D, 0]) - ox
+    x1 = 0.5 * (r[_B, 1] + r[_D, 1]) - oy
+    x2 = 0.5 * (r[_B, 2] + r[_D, 2]) - oz
+    s = x0 * y0 + x1 * y1 + x2 * y2
+    x0, x1, x2 = x0 - s * y0, x1 - s * y1, x2 - s * y2
+    n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    x0, x1, x2 = x0 / n, x1 / n, x2 / n
+    z0 = x1 * y2 - x2 * y1
+    z1 = x2 * y0 - x0 * y2
+    z2 = x0 * y1 - x1 * y0
+    R = np.empty((3, 3))  # columns x_k, y_k, z_k in W
+    R[0, 0], R[1, 0], R[2, 0] = x0, x1, x2
+    R[0, 1], R[1, 1], R[2, 1] = y0, y1, y2
+    R[0, 2], R[1, 2], R[2, 2] = z0, z1, z2
+
+    # ---------------------------------------------------------------- wing force on A-D in K, then in W
+    f_K = np.empty((4, 3))
+    if interpolate:
+        # corrector: the wing force interpolated in time between both ends of the step
+        for i in range(4):
+            for k in range(3):
+                f_K[i, k] = F0_K[i, k] + frac * (F1_K[i, k] - F0_K[i, k])
+    else:
+        # the step's solution corrected by the condensed stiffness for the move of the bridle points in K:
+        # dq = (r_i - r_k) R - q_b_K, F_K = F0_K - K_b dq
+        dq = np.empty(12)
+        for i in range(4):
+            d0 = r[i, 0] - ox
+            d1 = r[i, 1] - oy
+            d2 = r[i, 2] - oz
+            for k in range(3):
+                dq[3 * i + k] = (d0 * R[0, k] + d1 * R[1, k] + d2 * R[2, k]) - q_b_K[i, k]
+        for i in range(4):
+            for k in range(3):
+                row = 3 * i + k
+                acc = 0.0
+                for j in range(12):
+                    acc += K_b[row, j] * dq[j]
+                f_K[i, k] = F0_K[i, k] - acc
+
+    # ---------------------------------------------------------------- applied forces (ParticleSystem.forces)
+    f = np.zeros((5, 3))
+    for i in range(5):
+        f[i, 2] -= m[i] * gravity
+    for i in range(4):
+        for j in range(3):  # f_wing = f_K R^T
+            f[i, j] += f_K[i, 0] * R[j, 0] + f_K[i, 1] * R[j, 1] + f_K[i, 2] * R[j, 2]
+
+    # bridle lines, Eq. (10): F_c = k_c (l - L) + c_c dl/dt >= 0 along the line from the KCU to the wing point
+    e = np.empty((4, 3))
+    l = np.empty(4)
+    T = np.empty(4)
+    for i in range(4):
+        d0 = r[i, 0] - r[_KCU, 0]
+        d1 = r[i, 1] - r[_KCU, 1]
+        d2 = r[i, 2] - r[_KCU, 2]
+        li = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        e0, e1, e2 = d0 / li, d1 / li, d2 / li
+        ldot = e0 * (v[i, 0] - v[_KCU, 0]) + e1 * (v[i, 1] - v[_KCU, 1]) + e2 * (v[i, 2] - v[_KCU, 2])
+        Ti = k_c * (li - rest[i]) + c_c * ldot
+        if Ti < 0.0:  # a line cannot push (np.maximum(T, 0), nan propagates)
+            Ti = 0.0
+        e[i, 0], e[i, 1], e[i, 2] = e0, e1, e2
+        l[i] = li
+        T[i] = Ti
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(4):
+        f[i, 0] -= T[i] * e[i, 0]
+        f[i, 1] -= T[i] * e[i, 1]
+        f[i, 2] -= T[i] * e[i, 2]
+        s0 += T[i] * e[i, 0]
+        s1 += T[i] * e[i, 1]
+        s2 += T[i] * e[i, 2]
+    f[_KCU, 0] += s0
+    f[_KCU, 1] += s1
+    f[_KCU, 2] += s2
+
+    # line drag, Eq. (11): F_D = -1/2 rho C_D l d_c |v_a,n| v_a,n, normal component of the line's apparent wind
+    # (mean of the end velocities minus the mean wind), half to each end
+    cd = -0.5 * rho * line_cd * line_diameter
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(4):
+        va0 = 0.5 * (v[i, 0] + v[_KCU, 0]) - 0.5 * (wind[i, 0] + wind[_KCU, 0])
+        va1 = 0.5 * (v[i, 1] + v[_KCU, 1]) - 0.5 * (wind[i, 1] + wind[_KCU, 1])
+        va2 = 0.5 * (v[i, 2] + v[_KCU, 2]) - 0.5 * (wind[i, 2] + wind[_KCU, 2])
+        p = va0 * e[i, 0] + va1 * e[i, 1] + va2 * e[i, 2]
+        vn0 = va0 - p * e[i, 0]
+        vn1 = va1 - p * e[i, 1]
+        vn2 = va2 - p * e[i, 2]
+        c = cd * (l[i] * math.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2))
+        fd0, fd1, fd2 = c * vn0, c * vn1, c * vn2
+        f[i, 0] += 0.5 * fd0
+        f[i, 1] += 0.5 * fd1
+        f[i, 2] += 0.5 * fd2
+        s0 += fd0
+        s1 += fd1
+        s2 += fd2
+    f[_KCU, 0] += 0.5 * s0
+    f[_KCU, 1] += 0.5 * s1
+    f[_KCU, 2] += 0.5 * s2
+
+    if tether_diameter > 0.0:
+        # optional tether drag (not in the paper's model): Eq. (11) for the tether as one straight line, mean
+        # velocity of its ends (ground end at rest), wind at the KCU; half to the KCU
+        lt = math.sqrt(r[_KCU, 0] * r[_KCU, 0] + r[_KCU, 1] * r[_KCU, 1] + r[_KCU, 2] * r[_KCU, 2])
+        et0, et1, et2 = r[_KCU, 0] / lt, r[_KCU, 1] / lt, r[_KCU, 2] / lt
+        vt0 = 0.5 * v[_KCU, 0] - wind[_KCU, 0]
+        vt1 = 0.5 * v[_KCU, 1] - wind[_KCU, 1]
+        vt2 = 0.5 * v[_KCU, 2] - wind[_KCU, 2]
+        p = vt0 * et0 + vt1 * et1 + vt2 * et2
+        vn0, vn1, vn2 = vt0 - p * et0, vt1 - p * et1, vt2 - p * et2
+        c = 0.5 * (-0.5 * rho * line_cd * tether_diameter * lt * math.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2))
+        f[_KCU, 0] += c * vn0
+        f[_KCU, 1] += c * vn1
+        f[_KCU, 2] += c * vn2
+
+    # relative damping between the wing points: dashpots c_ij along the pairs A-C, B-D, A-D, B-C (reference: all
+    # -fp added to the first points of the pairs, then all +fp to the second points, as np.add.at)
+    fp = np.empty((4, 3))
+    for q in range(4):
+        i, j = pair_index(q)
+        d0 = r[i, 0] - r[j, 0]
+        d1 = r[i, 1] - r[j, 1]
+        d2 = r[i, 2] - r[j, 2]
+        lp = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        e0, e1, e2 = d0 / lp, d1 / lp, d2 / lp
+        pdot = e0 * (v[i, 0] - v[j, 0]) + e1 * (v[i, 1] - v[j, 1]) + e2 * (v[i, 2] - v[j, 2])
+        c = pair_damping[q] * pdot
+        fp[q, 0], fp[q, 1], fp[q, 2] = c * e0, c * e1, c * e2
+    for q in range(4):
+        i, j = pair_index(q)
+        f[i, 0] -= fp[q, 0]
+        f[i, 1] -= fp[q, 1]
+        f[i, 2] -= fp[q, 2]
+    for q in range(4):
+        i, j = pair_index(q)
+        f[j, 0] += fp[q, 0]
+        f[j, 1] += fp[q, 1]
+        f[j, 2] += fp[q, 2]
+
+    # ---------------------------------------------------------------- constrained accelerations, Eq. (12-13)
+    # M a = f + G^T lam, G a = -dG/dt v - 2 alpha G v - alpha^2 g (Baumgarte), g = 1/2 (|d|^2 - L^2) for the tether
+    # (d = r_KCU, ground station at the origin) and the tip beams A-B, C-D. The three constraints share no mass, so
+    # S = G M^-1 G^T is diagonal and lam_c = rhs_c / S_cc (what np.linalg.solve returns for a diagonal S).
+    a = np.empty((5, 3))
+    lam = np.empty(3)
+    minv = np.empty(5)
+    for i in range(5):
+        minv[i] = 1.0 / m[i]
+        for k in range(3):
+            a[i, k] = minv[i] * f[i, k]  # a_free
+    # tether: G = [0 ... r_KCU]
+    rk0, rk1, rk2 = r[_KCU, 0], r[_KCU, 1], r[_KCU, 2]
+    g = 0.5 * ((rk0 * rk0 + rk1 * rk1 + rk2 * rk2) - tether_length * tether_length)
+    gdot_v = v[_KCU, 0] * v[_KCU, 0] + v[_KCU, 1] * v[_KCU, 1] + v[_KCU, 2] * v[_KCU, 2]
+    Gv = rk0 * v[_KCU, 0] + rk1 * v[_KCU, 1] + rk2 * v[_KCU, 2]
+    Ga = rk0 * a[_KCU, 0] + rk1 * a[_KCU, 1] + rk2 * a[_KCU, 2]
+    S = rk0 * minv[_KCU] * rk0 + rk1 * minv[_KCU] * rk1 + rk2 * minv[_KCU] * rk2
+    lam[0] = (-gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga) / S
+    for k in range(3):
+        a[_KCU, k] += minv[_KCU] * (r[_KCU, k] * lam[0])
+    # tip beams: G = [... d ... -d ...] at (i, j) = (A, B), (C, D)
+    for c in range(1, 3):
+        i = 2 * (c - 1)
+        j = i + 1
+        L = tip_lengths[c - 1]
+        d0 = r[i, 0] - r[j, 0]
+        d1 = r[i, 1] - r[j, 1]
+        d2 = r[i, 2] - r[j, 2]
+        dv0 = v[i, 0] - v[j, 0]
+        dv1 = v[i, 1] - v[j, 1]
+        dv2 = v[i, 2] - v[j, 2]
+        g = 0.5 * ((d0 * d0 + d1 * d1 + d2 * d2) - L * L)
+        gdot_v = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
+        Gv = d0 * v[i, 0] + d1 * v[i, 1] + d2 * v[i, 2] - d0 * v[j, 0] - d1 * v[j, 1] - d2 * v[j, 2]
+        Ga = d0 * a[i, 0] + d1 * a[i, 1] + d2 * a[i, 2] - d0 * a[j, 0] - d1 * a[j, 1] - d2 * a[j, 2]
+        S = (d0 * minv[i] * d0 + d1 * minv[i] * d1 + d2 * minv[i] * d2
+             + d0 * minv[j] * d0 + d1 * minv[j] * d1 + d2 * minv[j] * d2)
+        lc = (-gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga) / S
+        lam[c] = lc
+        a[i, 0] += minv[i] * (d0 * lc)
+        a[i, 1] += minv[i] * (d1 * lc)
+        a[i, 2] += minv[i] * (d2 * lc)
+        a[j, 0] += minv[j] * (-d0 * lc)
+        a[j, 1] += minv[j] * (-d1 * lc)
+        a[j, 2] += minv[j] * (-d2 * lc)
+    return a, lam
+
+
+@njit(**_JIT)
+def pair_index(q):
+    """Mass indices (i, j) of the damped pair ``q`` (particles.DAMPED_PAIRS: A-C, B-D, A-D, B-C)."""
+    if q == 0:
+        return _A, _C
+    if q == 1:
+        return _B, _D
+    if q == 2:
+        return _A, _D
+    return _B, _C

@@ -1,0 +1,165 @@
+"""Compiled right-hand side of the particle system (kite_env.dynamics.kernels) against the NumPy reference path of
+FlightSimulator._rhs: frame K, wing force (condensed-stiffness correction or interpolation), Eq. (10) line forces
+with the tension clip, Eq. (11) line and tether drag, pair dampers, Eq. (12-13) constrained accelerations."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from kite_env.config import Config
+from kite_env.dynamics.kernels import particle_accelerations
+from kite_env.dynamics.particles import A, B, C, D, KCU, ParticleSystem
+from kite_env.dynamics.simulator import FlightSimulator
+from kite_env.structure import kernels as structure_kernels
+
+pytestmark = pytest.mark.skipif(not structure_kernels.NUMBA_AVAILABLE, reason="numba not installed")
+
+# bridle points A, B, C, D in frame K [m]: x_k aft, y_k towards A, z_k up (away from the KCU)
+Q0 = np.array([[0.0, 2.6, 0.0], [0.55, 2.5, -0.08], [0.0, -2.6, 0.0], [0.55, -2.5, -0.08]])
+
+
+class ShearWind:
+    """Wind that differs at every mass (shear, a cross component, time dependence) so that rows cannot be mixed up."""
+
+    def velocity(self, t, r):
+        r = np.asarray(r, dtype=float)
+        out = np.empty(r.shape)
+        out[..., 0] = 8.0 * (np.maximum(r[..., 2], 1.0) / 10.0) ** 0.14 + 0.5 * np.sin(0.3 * t)
+        out[..., 1] = 0.05 * r[..., 0] - 1.0
+        out[..., 2] = 0.3 * np.cos(0.1 * r[..., 1])
+        return out
+
+
+class DesignBridleOnly:
+    """Stands in for the wing: FlightSimulator.__init__ reads only ``design_bridle`` from a given wing, and _rhs uses
+    only the held wing force, so no aeroelastic solve is needed here."""
+
+    design_bridle = Q0
+
+
+def simulator(backend, tether_diameter=0.0):
+    cfg = Config()
+    cfg = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, tether_diameter_m=tether_diameter))
+    sim = FlightSimulator(cfg, ShearWind(), wing=DesignBridleOnly(), backend=backend)
+    sim.particles = ParticleSystem(cfg.dynamics, sim.tip_lengths, [500.0, 800.0, 300.0, 300.0], cfg.aero.rho_kg_m3)
+    return sim
+
+
+def flight_state(seed, sim, slack):
+    """A kite at 80 m on the tether, its frame tilted at random, flying at ~25 m/s across the wind, slightly off the
+    constraints; the bridle lines stretched by 0.1-0.3 m (0.5-1.4 kN) except line ``slack`` (1 m too long). Also
+    sets the held wing force of ``sim`` (lift-dominated, in K), the wing solution's bridle points and a condensed
+    wing stiffness."""
+    rng = np.random.default_rng(seed)
+    el, az = np.deg2rad(rng.uniform(20.0, 60.0)), np.deg2rad(rng.uniform(-40.0, 40.0))
+    e_r = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    z = e_r + 0.1 * rng.normal(size=3)
+    z /= np.linalg.norm(z)
+    x = np.cross(z, rng.normal(size=3))
+    x /= np.linalg.norm(x)
+    R = np.column_stack([x, np.cross(z, x), z])
+    kcu = 80.0 * e_r
+    r = np.vstack([kcu + 24.86 * z + Q0 @ R.T, kcu]) + 0.01 * rng.normal(size=(5, 3))
+    tangent = np.cross(e_r, [0.0, 0.0, 1.0])
+    tangent /= np.linalg.norm(tangent)
+    v = 25.0 * tangent + 0.5 * rng.normal(size=(5, 3))
+    l = np.linalg.norm(r[:4] - r[KCU], axis=1)
+    rest = l - rng.uniform(0.1, 0.3, size=4)
+    rest[slack] = l[slack] + 1.0
+    sim.particles.set_steering(rest[B], rest[D])
+    sim.particles.rest[[A, C]] = rest[[A, C]]
+    F = rng.normal(scale=40.0, size=(4, 3))
+    F[:, 2] += [900.0, 350.0, 900.0, 350.0]
+    sim._F_k_K = F
+    sim._q_b_K = Q0 + 0.01 * rng.normal(size=(4, 3))
+    K = rng.normal(scale=500.0, size=(12, 12))
+    sim._K_b = K @ K.T / 12.0 + 3000.0 * np.eye(12)
+    return r, v, rng
+
+
+def assert_same(got, ref):
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
+
+
+@pytest.mark.parametrize("tether_diameter", [0.0, 0.01])
+@pytest.mark.parametrize("mode", ["correction", "interpolation"])
+def test_kernel_matches_numpy_reference(mode, tether_diameter):
+    ref, nb = simulator("numpy", tether_diameter), simulator("numba", tether_diameter)
+    for seed in range(4):
+        for sim in (ref, nb):
+            r, v, rng = flight_state(seed, sim, slack=seed)
+            sim._F_end_K = None if mode == "correction" else sim._F_k_K + rng.normal(scale=100.0, size=(4, 3))
+        frac = rng.uniform()
+        t = 0.37 * seed
+        # the slack line is clipped to zero tension, the others pull (Eq. 10)
+        T, l = ref.particles.line_forces(r, v)
+        assert T[seed] == 0.0 and np.all(np.delete(T, seed) > 0.0)
+        v_out, a_ref, lam_ref = ref._rhs(t, r, v, frac)
+        v_nb, a_nb, lam_nb = nb._rhs(t, r, v, frac)
+        assert v_nb is v and a_nb.shape == (5, 3) and lam_nb.shape == (3,)
+        assert_same(a_nb, a_ref)
+        assert_same(lam_nb, lam_ref)
+        # the accelerations satisfy the stabilised constraint equations G a = -dG/dt v - 2 alpha G v - alpha^2 g
+        g, G, gdot_v = nb.particles._constraints(r, v)
+        al = nb.cfg.dynamics.baumgarte_1_per_s
+        np.testing.assert_allclose(G @ a_nb.ravel(), -gdot_v - 2 * al * (G @ v.ravel()) - al * al * g,
+                                   rtol=1e-10, atol=1e-9 * np.max(np.abs(G @ a_nb.ravel())))
+
+
+def test_wing_force_modes_and_tether_drag_change_the_result():
+    """The branches compared above are live: the stiffness correction, the interpolation and the tether drag each
+    change the accelerations, and the tether drag acts on the KCU alone before the constraint forces."""
+    sim = simulator("numba")
+    r, v, _ = flight_state(7, sim, slack=B)
+    params = sim.particles.kernel_parameters()
+    F0, q, K = sim._F_k_K, sim._q_b_K, sim._K_b
+    wind = sim.wind.velocity(0.0, r)
+    a_corr, _ = particle_accelerations(r, v, wind, F0, F0, 0.0, False, q, K, *params)
+    a_zero_K, _ = particle_accelerations(r, v, wind, F0, F0, 0.0, False, q, 0.0 * K, *params)
+    a_held, _ = particle_accelerations(r, v, wind, F0, 2.0 * F0, 0.0, True, q, K, *params)
+    a_end, _ = particle_accelerations(r, v, wind, F0, 2.0 * F0, 1.0, True, q, K, *params)
+    assert np.max(np.abs(a_corr - a_zero_K)) > 1e-3
+    np.testing.assert_allclose(a_held, a_zero_K, rtol=1e-13, atol=1e-12)  # frac = 0: the force at the start
+    assert np.max(np.abs(a_end - a_held)) > 1.0
+    # tether drag, Eq. (11) for the tether: the applied force differs on the KCU by the analytic drag only
+    dt = 0.02
+    on = simulator("numpy", tether_diameter=dt)
+    on.particles.rest[:] = sim.particles.rest
+    f_off, _ = sim.particles.forces(r, v, wind, np.zeros((4, 3)))
+    f_on, _ = on.particles.forces(r, v, wind, np.zeros((4, 3)))
+    lt = np.linalg.norm(r[KCU])
+    vt = 0.5 * v[KCU] - wind[KCU]
+    vtn = vt - (vt @ r[KCU] / lt) * r[KCU] / lt
+    drag = -0.25 * on.particles.rho * on.cfg.dynamics.line_cd * dt * lt * np.linalg.norm(vtn) * vtn
+    np.testing.assert_allclose(f_on[KCU] - f_off[KCU], drag, rtol=1e-9)
+    np.testing.assert_array_equal(f_on[:4], f_off[:4])
+    params_on = list(params)
+    params_on[7] = dt
+    a_on, _ = particle_accelerations(r, v, wind, F0, F0, 0.0, False, q, K, *params_on)
+    assert np.max(np.abs(a_on - a_corr)) > 1e-3
+
+
+def test_degenerate_geometry_gives_nan_like_numpy():
+    """A and C coincident: no frame K. Both paths return non-finite accelerations (reported by the simulator as a
+    non-finite state) instead of raising."""
+    ref, nb = simulator("numpy"), simulator("numba")
+    for sim in (ref, nb):
+        r, v, _ = flight_state(3, sim, slack=D)
+        sim._F_end_K = None
+    r[C] = r[A]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        _, a_ref, _ = ref._rhs(0.0, r, v)
+    _, a_nb, _ = nb._rhs(0.0, r, v)
+    assert not np.all(np.isfinite(a_ref)) and not np.all(np.isfinite(a_nb))
+
+
+def test_backend_selection(monkeypatch):
+    assert simulator("numpy").backend == "numpy"
+    assert simulator("numba").backend == "numba"
+    monkeypatch.setenv(structure_kernels.ENV_VAR, "numpy")
+    assert simulator("auto").backend == "numpy"
+    monkeypatch.setenv(structure_kernels.ENV_VAR, "numba")
+    assert simulator("auto").backend == "numba"
+    with pytest.raises(ValueError):
+        simulator("cuda")
