@@ -298,3 +298,58 @@ def pair_index(q):
     if q == 2:
         return _A, _D
     return _B, _C
+
+
+@njit(**_JIT)
+def project_constraints(r, v, m, tether_length, tip_lengths, iters):
+    """Mass-weighted projection of positions (``iters`` passes), then velocities, onto the tether and tip-beam
+    distance constraints: :meth:`kite_env.dynamics.particles.ParticleSystem.project` in scalar loops.
+
+    The three constraints ``g = 1/2 (|d|^2 - L^2)`` (tether at the KCU, A-B, C-D) involve disjoint masses, so
+    ``G M^-1 G^T`` is diagonal and each constraint is projected on its own: ``r -= M^-1 G^T g / (G M^-1 G^T)``,
+    then ``v -= M^-1 G^T (G v) / (G M^-1 G^T)``. Returns new arrays ``r, v`` (5, 3).
+    """
+    r = r.copy()
+    v = v.copy()
+    # (i, j, L): constraint between masses i and j (j < 0: the ground station at the origin)
+    pairs_i = (_KCU, _A, _C)
+    pairs_j = (-1, _B, _D)
+    lengths = (tether_length, tip_lengths[0], tip_lengths[1])
+    for _ in range(iters):
+        for c in range(3):
+            i, j, L = pairs_i[c], pairs_j[c], lengths[c]
+            d0, d1, d2 = r[i, 0], r[i, 1], r[i, 2]
+            wi = 1.0 / m[i]
+            wj = 0.0
+            if j >= 0:
+                d0, d1, d2 = d0 - r[j, 0], d1 - r[j, 1], d2 - r[j, 2]
+                wj = 1.0 / m[j]
+            dd = d0 * d0 + d1 * d1 + d2 * d2
+            s = (0.5 * (dd - L * L)) / (dd * (wi + wj))
+            r[i, 0] -= wi * s * d0
+            r[i, 1] -= wi * s * d1
+            r[i, 2] -= wi * s * d2
+            if j >= 0:
+                r[j, 0] += wj * s * d0
+                r[j, 1] += wj * s * d1
+                r[j, 2] += wj * s * d2
+    for c in range(3):
+        i, j = pairs_i[c], pairs_j[c]
+        d0, d1, d2 = r[i, 0], r[i, 1], r[i, 2]
+        u0, u1, u2 = v[i, 0], v[i, 1], v[i, 2]
+        wi = 1.0 / m[i]
+        wj = 0.0
+        if j >= 0:
+            d0, d1, d2 = d0 - r[j, 0], d1 - r[j, 1], d2 - r[j, 2]
+            u0, u1, u2 = u0 - v[j, 0], u1 - v[j, 1], u2 - v[j, 2]
+            wj = 1.0 / m[j]
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        s = (d0 * u0 + d1 * u1 + d2 * u2) / (dd * (wi + wj))
+        v[i, 0] -= wi * s * d0
+        v[i, 1] -= wi * s * d1
+        v[i, 2] -= wi * s * d2
+        if j >= 0:
+            v[j, 0] += wj * s * d0
+            v[j, 1] += wj * s * d1
+            v[j, 2] += wj * s * d2
+    return r, v

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.config import Config
-from kite_env.dynamics.kernels import particle_accelerations
+from kite_env.dynamics.kernels import particle_accelerations, project_constraints
 from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
 from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
@@ -155,7 +155,7 @@ class FlightSimulator:
         self.pair_stiffness = k_pairs
         self.particles = ParticleSystem(cfg.dynamics, self.tip_lengths, k_pairs, cfg.aero.rho_kg_m3)
         self.particles.set_steering(self.L_B0, self.L_D0)
-        r, v = self.particles.project(r, v)
+        r, v = self._project(r, v)
         self.state = ParticleState(r, v)
         self.t = t0
         return self._solve_wing(first=True)
@@ -206,6 +206,13 @@ class FlightSimulator:
         a, lam = self.particles.accelerations(r, v, f)
         return v, a, lam
 
+    def _project(self, r: np.ndarray, v: np.ndarray):
+        """Positions and velocities projected onto the distance constraints (compiled or NumPy reference)."""
+        if self.backend == "numba":
+            p = self.particles
+            return project_constraints(r, v, p.m, float(p.cfg.tether_length_m), p.tip_lengths, 3)
+        return self.particles.project(r, v)
+
     def _rk4(self, t, r0, v0):
         dt = self.dt
         k1v, k1a, lam = self._rhs(t, r0, v0, 0.0)
@@ -217,7 +224,7 @@ class FlightSimulator:
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
             raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
         drift = self.particles.constraint_violation(r)
-        r, v = self.particles.project(r, v)
+        r, v = self._project(r, v)
         return r, v, lam, drift
 
     def step(self, L_B: float, L_D: float) -> StepRecord:
