@@ -85,3 +85,50 @@ def format_table(rows: list[dict]) -> str:
     for r in rows:
         lines.append("| " + " | ".join(format(r[c[0]], c[2]) for c in cols) + " |")
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- whole flight model
+PAPER_REAL_TIME_FACTOR = 27.5  # wall seconds per simulated second of the paper's Matlab model (Sect. III)
+
+
+def bench_flight(cfg: Config | None = None, duration_s: float = 3.0, dt_values=(5e-3, 1e-2)) -> list[dict]:
+    """Real-time factor of the baseline figure-eight in the full model (wing + particles + controller + logging).
+
+    For each time step in ``dt_values`` the baseline flies ``duration_s`` from the crossing point after a short
+    untimed flight (numba compilation and caches). Wall time per simulated second is measured on the whole
+    :func:`kite_env.flight.fly` call except its initial cold wing solve (reset), and per step for the simulator
+    step (wing solve + RK4) from the flight log. A flight that ends early (the wing fails) is timed up to its end
+    and flagged.
+    """
+    import dataclasses
+
+    from kite_env.flight import fly
+
+    cfg = cfg or Config()
+    fly(cfg, None, 0.05)  # warm-up: compile and load the numba kernels
+    rows = []
+    for dt in dt_values:
+        c = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, dt_s=float(dt)))
+        log = fly(c, None, duration_s)
+        sim_t = float(log.meta["sim_time_s"])
+        step_wall = np.asarray(log.series["wall_time"], dtype=float)[1:]  # step k's wall time is logged at k + 1
+        reset_wall = float(log.meta["wall_time_s"]) - float(np.sum(step_wall))  # reset, control, logging
+        rows.append({
+            "dt_ms": 1e3 * dt, "sim_time_s": sim_t, "completed": log.meta["termination_reason"] == "completed",
+            "wall_time_s": float(log.meta["wall_time_s"]),
+            "real_time_factor": float(log.meta["wall_time_s"]) / sim_t if sim_t > 0 else float("nan"),
+            "step_ms_median": 1e3 * float(np.median(step_wall)), "step_ms_p90": 1e3 * float(np.percentile(step_wall, 90)),
+            "other_wall_s": reset_wall,
+        })
+    return rows
+
+
+def format_flight_table(rows: list[dict]) -> str:
+    cols = [("dt_ms", "time step [ms]", ".1f"), ("sim_time_s", "simulated [s]", ".2f"),
+            ("wall_time_s", "wall [s]", ".1f"), ("real_time_factor", "wall / simulated", ".2f"),
+            ("step_ms_median", "step median [ms]", ".1f"), ("step_ms_p90", "step p90 [ms]", ".1f"),
+            ("other_wall_s", "reset + control + logging [s]", ".1f")]
+    lines = ["| " + " | ".join(c[1] for c in cols) + " |", "|" + "|".join("---:" for _ in cols) + "|"]
+    for r in rows:
+        lines.append("| " + " | ".join(format(r[c[0]], c[2]) for c in cols) + " |")
+    return "\n".join(lines)
