@@ -135,7 +135,10 @@ class Assembler:
         data = np.zeros(self.nnz) if tangent else None
         for s, dofs, kmap in zip(self.sets, self._set_dofs, self._set_maps):
             conn = s.conn
-            f_e, K_e = s.internal(x[conn], Rn[conn])
+            if not tangent and getattr(s, "supports_residual_only", False):
+                f_e, K_e = s.internal(x[conn], Rn[conn], tangent=False)
+            else:
+                f_e, K_e = s.internal(x[conn], Rn[conn])
             if self._scatter is not None:
                 self._scatter(f_int, dofs, f_e.ravel())
                 if tangent:

@@ -232,13 +232,18 @@ class BeamSet:
         return m1, m2
 
     # ------------------------------------------------------------------------------------------ forces
-    def internal(self, x_e, R_e):
+    #: :meth:`internal` accepts ``tangent=False`` (read by the Assembler)
+    supports_residual_only = True
+
+    def internal(self, x_e, R_e, tangent: bool = True):
         """Internal force and consistent tangent of every element.
 
         Parameters
         ----------
         x_e : (n_e, 2, 3) float [m]   current node positions.
         R_e : (n_e, 2, 3, 3) float    nodal rotation matrices.
+        tangent : bool                False: ``K_e`` is None and the compiled kernel skips its tangent (the forces
+                                      are the same); the NumPy reference computes both either way.
 
         Returns
         -------
@@ -248,10 +253,11 @@ class BeamSet:
         Both are new arrays on every call (whatever the backend).
         """
         if self.backend == "numba":
-            return self._internal_numba(x_e, R_e)
-        return self._internal_numpy(x_e, R_e)
+            return self._internal_numba(x_e, R_e, tangent)
+        f, K = self._internal_numpy(x_e, R_e)
+        return f, (K if tangent else None)
 
-    def _internal_numba(self, x_e, R_e):
+    def _internal_numba(self, x_e, R_e, tangent: bool = True):
         """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.beam_internal`."""
         from .kernels import beam_internal
 
@@ -262,9 +268,9 @@ class BeamSet:
             raise ValueError(f"BeamSet.internal: expected x_e (n_e, 2, 3) and R_e (n_e, 2, 3, 3) with n_e = {n}, "
                              f"got {x_e.shape} and {R_e.shape}")
         f = np.empty((n, 12))
-        K = np.empty((n, 12, 12))
-        beam_internal(x_e, R_e, self.R0, self.L0, self.EA, self._k11, self._k12, f, K, np.empty(n))
-        return f, K
+        K = np.empty((n, 12, 12) if tangent else (1, 12, 12))
+        beam_internal(x_e, R_e, self.R0, self.L0, self.EA, self._k11, self._k12, f, K, np.empty(n), bool(tangent))
+        return f, (K if tangent else None)
 
     def _internal_numpy(self, x_e, R_e):
         """:meth:`internal`, vectorised NumPy reference implementation."""

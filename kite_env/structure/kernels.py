@@ -265,7 +265,7 @@ def scatter_add(out, index, values):
 
 
 @njit(**_JIT)
-def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out):
+def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out, want_K=True):
     """Co-rotational Euler-Bernoulli beams, as :meth:`kite_env.structure.beam.BeamSet.internal`.
 
     Parameters
@@ -274,6 +274,7 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out):
     R0 : (n, 3, 3) float                                   reference element frames (columns e1, e2, e3).
     L0, EA : (n,) float [m], [N];  k11, k12 : (n, 3) float [N m]   local stiffness diagonals (``BeamSet._k11``).
     f_out : (n, 12), K_out : (n, 12, 12), U_out : (n,) float   outputs (overwritten).
+    want_K : bool   compute the tangent; False: only ``f_out`` and ``U_out`` are written (same values).
     """
     n = x_e.shape[0]
     r1, r2, r3, q, tmp3 = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -393,6 +394,8 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out):
         for i in range(3):
             f_out[e, 3 + i] += Mi[0, i]
             f_out[e, 9 + i] += Mi[1, i]
+        if not want_K:
+            continue
         # ---- d theta_k / dd = T_k^{-1} Rr^T E_k = T_k^{-1} Rr^T (P_k - W)
         for a in range(3):
             ra0, ra1, ra2 = Rr[0, a], Rr[1, a], Rr[2, a]
@@ -530,7 +533,7 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out):
 
 # ============================================================================================ shell
 @njit(**_JIT)
-def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending, f_out, K_out, U_out):
+def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending, f_out, K_out, U_out, want_K=True):
     """Flat shell triangles (relaxed SVK membrane + co-rotational DKT + drilling), as ``ShellSet.internal``.
 
     Parameters
@@ -541,6 +544,8 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
     K_l : (n, 9, 9) float [N m]   local bending + drilling stiffness;  eps : float  slack fraction.
     wrinkling, bending : bool     as the ``ShellSet`` options.
     f_out : (n, 18), K_out : (n, 18, 18), U_out : (n,) float   outputs (overwritten).
+    want_K : bool   compute the tangent; False: only ``f_out`` and ``U_out`` are written (same values), ``K_out`` is
+                    left untouched (for the residual-only assemblies of the modified Newton iteration).
     """
     n = x_e.shape[0]
     F, S, D = np.empty((3, 2)), np.empty(3), np.empty((3, 3))
@@ -610,37 +615,40 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
         ah = A0h[e]
         for k in range(9):
             fm[k] = ah * (S[0] * B[0, k] + S[1] * B[1, k] + S[2] * B[2, k])
-            for v in range(3):
-                DB[v, k] = D[v, 0] * B[0, k] + D[v, 1] * B[1, k] + D[v, 2] * B[2, k]
-        for k in range(9):  # B^T D B (symmetric)
-            b0, b1, b2 = B[0, k], B[1, k], B[2, k]
-            for ll in range(k, 9):
-                v = b0 * DB[0, ll] + b1 * DB[1, ll] + b2 * DB[2, ll]
-                Km[k, ll] = v
-                Km[ll, k] = v
-        for a in range(3):
-            for b in range(3):
-                gsg = G[e, a, 0] * (S[0] * G[e, b, 0] + S[2] * G[e, b, 1]) \
-                    + G[e, a, 1] * (S[2] * G[e, b, 0] + S[1] * G[e, b, 1])
-                for i in range(3):
-                    Km[3 * a + i, 3 * b + i] += gsg
-        for k in range(9):
-            for ll in range(9):
-                Km[k, ll] *= ah
         U = ah * Wd
+        if want_K:  # membrane tangent K_m = A0 h (B^T D B + (G S G^T) (x) I_3)
+            for k in range(9):
+                for v in range(3):
+                    DB[v, k] = D[v, 0] * B[0, k] + D[v, 1] * B[1, k] + D[v, 2] * B[2, k]
+            for k in range(9):  # B^T D B (symmetric)
+                b0, b1, b2 = B[0, k], B[1, k], B[2, k]
+                for ll in range(k, 9):
+                    v = b0 * DB[0, ll] + b1 * DB[1, ll] + b2 * DB[2, ll]
+                    Km[k, ll] = v
+                    Km[ll, k] = v
+            for a in range(3):
+                for b in range(3):
+                    gsg = G[e, a, 0] * (S[0] * G[e, b, 0] + S[2] * G[e, b, 1]) \
+                        + G[e, a, 1] * (S[2] * G[e, b, 0] + S[1] * G[e, b, 1])
+                    for i in range(3):
+                        Km[3 * a + i, 3 * b + i] += gsg
+            for k in range(9):
+                for ll in range(9):
+                    Km[k, ll] *= ah
         if not bending:
             for aa in range(3):
                 for i in range(3):
                     f_out[e, 6 * aa + i] = fm[3 * aa + i]
                     f_out[e, 6 * aa + 3 + i] = 0.0
-            for i in range(18):
-                for j in range(18):
-                    K_out[e, i, j] = 0.0
-            for aa in range(3):
-                for bb in range(3):
-                    for i in range(3):
-                        for j in range(3):
-                            K_out[e, 6 * aa + i, 6 * bb + j] = Km[3 * aa + i, 3 * bb + j]
+            if want_K:
+                for i in range(18):
+                    for j in range(18):
+                        K_out[e, i, j] = 0.0
+                for aa in range(3):
+                    for bb in range(3):
+                        for i in range(3):
+                            for j in range(3):
+                                K_out[e, 6 * aa + i, 6 * bb + j] = Km[3 * aa + i, 3 * bb + j]
             U_out[e] = U
             continue
         # ---- element frame (shell_bending.element_frame)
@@ -728,6 +736,12 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
                 W[i, 6 + j] = wb
         for j in range(9):
             ft[j] = -(W[0, j] * M[0] + W[1, j] * M[1] + W[2, j] * M[2])
+        if not want_K:
+            for aa in range(3):
+                for i in range(3):
+                    f_out[e, 6 * aa + i] = fm[3 * aa + i] + ft[3 * aa + i]
+                    f_out[e, 6 * aa + 3 + i] = Mi[aa, i]
+            continue
         # ---- K_th = Q^T K_l Q + blockdiag(Rr dT_k Qm_k),  Q = blockdiag(Qm_k); X = K_l Q first
         for l2 in range(3):
             for j in range(3):

@@ -135,13 +135,18 @@ class ShellSet:
             U = U + 0.5 * np.einsum("ni,nij,nj->n", th, self.K_l, th)
         return U
 
-    def internal(self, x_e, R_e):
+    #: :meth:`internal` accepts ``tangent=False`` (read by the Assembler)
+    supports_residual_only = True
+
+    def internal(self, x_e, R_e, tangent: bool = True):
         """Internal force and consistent tangent of every element.
 
         Parameters
         ----------
         x_e : (n_e, 3, 3) float [m]   current node positions ``x[conn]``.
         R_e : (n_e, 3, 3, 3) float    nodal rotation matrices ``Rn[conn]``.
+        tangent : bool                False: ``K_e`` is None and the compiled kernel skips its tangent (the forces
+                                      are the same); the NumPy reference computes both either way.
 
         Returns
         -------
@@ -152,10 +157,11 @@ class ShellSet:
         Both are new arrays on every call (whatever the backend).
         """
         if self.backend == "numba":
-            return self._internal_numba(x_e, R_e)
-        return self._internal_numpy(x_e, R_e)
+            return self._internal_numba(x_e, R_e, tangent)
+        f, K = self._internal_numpy(x_e, R_e)
+        return f, (K if tangent else None)
 
-    def _internal_numba(self, x_e, R_e):
+    def _internal_numba(self, x_e, R_e, tangent: bool = True):
         """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.shell_internal`."""
         from .kernels import shell_internal
 
@@ -166,10 +172,10 @@ class ShellSet:
             raise ValueError(f"ShellSet.internal: expected x_e (n_e, 3, 3) and R_e (n_e, 3, 3, 3) with n_e = {n}, "
                              f"got {x_e.shape} and {R_e.shape}")
         f = np.empty((n, 18))
-        K = np.empty((n, 18, 18))
+        K = np.empty((n, 18, 18) if tangent else (1, 18, 18))
         shell_internal(x_e, R_e, self.R0, self.G, self.A0h, self.E, self.nu, self.C, self.K_l, self.eps_slack,
-                       self.wrinkling, self.bending, f, K, np.empty(n))
-        return f, K
+                       self.wrinkling, self.bending, f, K, np.empty(n), bool(tangent))
+        return f, (K if tangent else None)
 
     def _internal_numpy(self, x_e, R_e):
         """:meth:`internal`, vectorised NumPy reference implementation."""

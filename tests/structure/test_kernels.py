@@ -56,6 +56,8 @@ def _assert_beams_agree(conn, X0, up, stiff, x, Rn):
     f1, K1 = bn.internal(xe, Re)
     f2, K2 = bp.internal(xe, Re)
     assert f1.shape == f2.shape and K1.shape == K2.shape
+    f3, K3 = bn.internal(xe, Re, tangent=False)  # residual only: the same forces bit for bit
+    assert K3 is None and np.array_equal(f3, f1)
     assert _per_element_rel(f1, f2, _force_floor(K2, xe)) < RTOL
     assert _per_element_rel(K1, K2) < RTOL
     # energy of the kernel (not used by BeamSet.energy, which stays NumPy)
@@ -72,11 +74,18 @@ def _assert_shells_agree(s_args, x, R, **kw):
     f2, K2 = sp.internal(x, R)
     assert _per_element_rel(f1, f2, _force_floor(K2, x)) < RTOL
     assert _per_element_rel(K1, K2) < RTOL
+    # residual-only call (modified Newton): the same forces bit for bit, no tangent
+    f3, K3 = sn.internal(x, R, tangent=False)
+    assert K3 is None and np.array_equal(f3, f1)
     n = sn.n_elem
     U = np.empty(n)
     kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.wrinkling,
                            sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U)
     _assert_energy_agree(U, sp.energy(x, R), K2, x)
+    U3 = np.empty(n)
+    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.wrinkling,
+                           sn.bending, np.empty((n, 18)), np.empty((1, 18, 18)), U3, False)
+    assert np.array_equal(U3, U)
     return sp
 
 
@@ -283,3 +292,21 @@ def test_rotate_nodes_matches_rodrigues():
     out = np.empty_like(R)
     rotate_nodes(R, dw, out)
     np.testing.assert_allclose(out, np.einsum("nij,njk->nik", expm(dw), R), atol=1e-14)
+
+
+def test_residual_only_assembly_gives_the_same_internal_forces(kite):
+    """Assembler.assemble_data(tangent=False) (shells through the residual-only kernel, beams as before): the same
+    internal force vector bit for bit as with the tangent, and no tangent data."""
+    from kite_env.structure.assembly import Assembler
+
+    rng = np.random.default_rng(4)
+    x = kite.nodes + 0.02 * rng.normal(size=kite.nodes.shape)
+    Rn = expm(0.1 * rng.normal(size=kite.nodes.shape))
+    shells = ShellSet(kite.shells, kite.nodes, E_CANOPY, NU, H_CANOPY, backend="numba")
+    beams = BeamSet(kite.beams, kite.nodes, np.tile([0.0, 0.0, 1.0], (len(kite.beams), 1)), EA=1e5, EI2=50.0,
+                    EI3=50.0, GJ=20.0, backend="numba")
+    asm = Assembler(kite.nodes.shape[0], [shells, beams])
+    f_full, data = asm.assemble_data(x, Rn, tangent=True)
+    f_res, none = asm.assemble_data(x, Rn, tangent=False)
+    assert data is not None and none is None
+    assert np.array_equal(f_full, f_res) and np.any(f_full != 0.0)
