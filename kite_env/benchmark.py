@@ -117,7 +117,8 @@ def bench_flight(cfg: Config | None = None, duration_s: float = 3.0, dt_values=(
             "dt_ms": 1e3 * dt, "sim_time_s": sim_t, "completed": log.meta["termination_reason"] == "completed",
             "wall_time_s": float(log.meta["wall_time_s"]),
             "real_time_factor": float(log.meta["wall_time_s"]) / sim_t if sim_t > 0 else float("nan"),
-            "step_ms_median": 1e3 * float(np.median(step_wall)), "step_ms_p90": 1e3 * float(np.percentile(step_wall, 90)),
+            "step_ms_median": 1e3 * float(np.median(step_wall)),
+            "step_ms_p90": 1e3 * float(np.percentile(step_wall, 90)),
             "other_wall_s": reset_wall,
         })
     return rows

@@ -2,8 +2,8 @@
 
 One time step ``dt`` (``dynamics.dt_s``):
 
-1. frame K, its origin velocity ``v_k`` and rotation rate ``omega_k`` from A-D (:func:`kite_env.frames.kite_frame_rates`);
-   the wing state X = (v_k, omega_k, v_w) and the bridle-point positions ``q_b`` in K;
+1. frame K, its origin velocity ``v_k`` and rotation rate ``omega_k`` from A-D
+   (:func:`kite_env.frames.kite_frame_rates`); the wing state X = (v_k, omega_k, v_w) and the bridle-point positions ``q_b`` in K;
 2. the static aeroelastic wing at ``q_b`` and X (:class:`kite_env.fsi.AeroelasticWing`), warm-started from the last
    step, with the deformation velocity of Eq. (3) over ``dt``; it returns ``F_b``, and ``F_k = -F_b`` acts on A-D;
 3. the particle system (:mod:`kite_env.dynamics.particles`) advanced by one classical Runge-Kutta step (RK4). The
@@ -101,10 +101,10 @@ class FlightSimulator:
         """Place the kite with its KCU at ``l_t R0`` flying along the unit tangent ``e_t`` and solve the wing cold.
 
         The kite frame is oriented with the nose (``-x_k``) along the tangential part of the apparent velocity
-        (no sideslip) and pitched about ``y_k`` so that the bridle (KCU to r_k) continues the tether. The KCU sits below the tip mid-chord (as
-        :meth:`AeroelasticWing.kcu_position`) at the power-line rest length plus the static line stretch. The
-        steering-line rest lengths ``L_B0 = L_D0`` are set so that the initial steering lines carry their share of
-        the initial wing force (the controllers adjust them from there).
+        (no sideslip) and pitched about ``y_k`` so that the bridle (KCU to r_k) continues the tether. The KCU sits
+        below the tip mid-chord (as :meth:`AeroelasticWing.kcu_position`) at the power-line rest length plus the
+        static line stretch. The steering-line rest lengths ``L_B0 = L_D0`` are set so that the initial steering
+        lines carry their share of the initial wing force (the controllers adjust them from there).
         """
         cfg = self.cfg
         speed = cfg.sim.initial_speed_mps if speed_mps is None else float(speed_mps)
