@@ -150,3 +150,33 @@ def test_bad_input_rejected():
         wing.solve(np.full((4, 3), np.nan), fl)
     with pytest.raises(ValueError, match="support"):
         wing.solve(None, fl, support="glue")
+
+
+def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
+    """The tube-stiffness update of every iteration: the compiled loop (tube_secants) against the NumPy lines, at
+    the loaded state and at a strongly deformed copy of it (secants far from the initial stiffness, some tubes
+    beyond the collapse curvature)."""
+    from kite_env.structure.rotations import expm
+
+    wing = nominal[0]
+    beams = wing.beams
+    if beams.backend != "numba":
+        pytest.skip("numba not installed: only the NumPy path exists")
+    loaded = wing.state.copy()
+    bent = wing.state.copy()
+    bent.Rn[:] = expm(0.3 * np.random.default_rng(2).normal(size=bent.x.shape)) @ bent.Rn
+    saved = (beams.EI2.copy(), beams.EI3.copy(), beams.GJ.copy(), beams._k11.copy(), beams._k12.copy())
+    try:
+        for state in (loaded, bent):
+            out = {}
+            for backend in ("numba", "numpy"):
+                beams.backend = backend
+                collapsed = wing._update_tube_stiffness(state)
+                out[backend] = (beams.EI2.copy(), beams.GJ.copy(), collapsed)
+            np.testing.assert_allclose(out["numba"][0], out["numpy"][0], rtol=1e-12)
+            np.testing.assert_allclose(out["numba"][1], out["numpy"][1], rtol=1e-12)
+            np.testing.assert_array_equal(out["numba"][2], out["numpy"][2])
+        assert np.any(out["numba"][2]) and np.min(out["numba"][0][wing._tube_rows] / wing.tube_props.EI0) < 0.5
+    finally:
+        beams.backend = "numba"
+        beams.EI2[:], beams.EI3[:], beams.GJ[:], beams._k11[:], beams._k12[:] = saved

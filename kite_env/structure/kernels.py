@@ -228,6 +228,30 @@ def beam_local_rotations(x_e, R_e, R0, l_out, th_out):
 
 
 @njit(**_JIT)
+def tube_secants(th, l, rows, EI0, M_max, kappa_collapse, GJ0, c2, EI_out, GJ_out, collapsed_out):
+    """Breukels' secant tube stiffnesses from the local end rotations (``AeroelasticWing._update_tube_stiffness``).
+
+    th : (n_beams, 2, 3) float [rad], l : (n_beams,) float [m]   local end rotations and chord lengths
+    (:func:`beam_local_rotations`); rows : (n_tube,) int   the tube beams; EI0, M_max, kappa_collapse, GJ0, c2 :
+    (n_tube,) float   :class:`kite_env.structure.tube.TubeProperties`. Outputs (n_tube,): secant ``EI = M(kappa) /
+    kappa`` [N m^2] with the larger end curvature of the cubic element, ``|-(4 th1 + 2 th2)| / L`` and
+    ``|(2 th1 + 4 th2)| / L`` over the bending components, secant ``GJ = T(phi) / phi`` with the twist per length
+    ``phi = |th2_x - th1_x| / L`` (tube.secant_EI, tube.secant_GJ) and the collapse flag ``kappa > kappa_collapse``.
+    """
+    for k in range(rows.shape[0]):
+        e = rows[k]
+        L = l[e]
+        a1, a2 = -(4.0 * th[e, 0, 1] + 2.0 * th[e, 1, 1]) / L, -(4.0 * th[e, 0, 2] + 2.0 * th[e, 1, 2]) / L
+        b1, b2 = (2.0 * th[e, 0, 1] + 4.0 * th[e, 1, 1]) / L, (2.0 * th[e, 0, 2] + 4.0 * th[e, 1, 2]) / L
+        kappa = max(math.sqrt(a1 * a1 + a2 * a2), math.sqrt(b1 * b1 + b2 * b2))
+        x = EI0[k] * kappa / M_max[k]
+        EI_out[k] = EI0[k] * ((1.0 - 0.5 * x) if x < 1e-6 else -math.expm1(-x) / x)
+        y = c2[k] * abs(th[e, 1, 0] - th[e, 0, 0]) / L
+        GJ_out[k] = GJ0[k] * ((1.0 - y * y / 3.0) if y < 1e-6 else math.atan(y) / y)
+        collapsed_out[k] = abs(kappa) > kappa_collapse[k]
+
+
+@njit(**_JIT)
 def rotate_nodes(Rn, dw, out):
     """``out[n] = expm(dw[n]) @ Rn[n]`` (Rodrigues, series below ``_ROT_SMALL`` as :func:`rotations.expm`)."""
     for n in range(Rn.shape[0]):
