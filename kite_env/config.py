@@ -56,6 +56,9 @@ class AeroConfig:
     rho_kg_m3: float = 1.225  # air density, sea level (physics_facts 4.2) [kg/m^3]
     # Eq. (9) M = 1/2 rho CM c^p w V^2: p = 2 dimensionally consistent (default); 1 = as printed in the paper
     moment_chord_power: float = 2.0  # [-]
+    # luffing (a modelling option, not the paper): below this section CL the load moves from the canopy nodes to the
+    # LE and TE nodes (all of it at CL <= 0: a membrane cannot carry a reversed pressure); 0 = off (the paper)
+    luffing_cl: float = 0.0  # [-]
 
 
 @dataclass(frozen=True)
@@ -151,7 +154,7 @@ _POSITIVE = {
 _NON_NEGATIVE = {
     "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
-    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s",
+    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "aero.luffing_cl",
 }
 
 

@@ -125,7 +125,7 @@ def _lei_coefficients(alpha, t, kappa, x_ref):
 
 @njit(**_JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
-                         has_span, scal, vec, node, zeta, axes):
+                         has_span, scal, vec, node, zeta, axes, luff=0.0):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
 
     Parameters
@@ -152,6 +152,9 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         Spanwise LE-line directions; read only when ``has_span``, else computed from the LE nodes as
         ``sections.spanwise_directions`` does.
     has_span : bool
+    luff : float
+        ``aero.luffing_cl`` (0: off): below this CL the share ``1 - CL/luff`` of the section load moves to the LE and
+        TE nodes (``loads.distribute`` with ``canopy_share``).
 
     Outputs (written)
     -----------------
@@ -295,16 +298,32 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         mu = (moment - (mz * f0 - (ms - s_ref) * f2)) / den
         fm0 = f0 * inv_m
         fm2 = f2 * inv_m
+        wl = 1.0
+        mu2 = ms2 = mz2 = 0.0
+        if luff > 0.0:
+            wl = min(max(cl / luff, 0.0), 1.0)
+            # the same minimum-norm law on the LE and TE nodes only
+            e_s0, e_z0 = node[1, i, 0, 0], node[1, i, 0, 2]
+            e_s1, e_z1 = node[1, i, m - 1, 0], node[1, i, m - 1, 2]
+            ms2, mz2 = 0.5 * (e_s0 + e_s1), 0.5 * (e_z0 + e_z1)
+            den2 = (e_z0 - mz2) ** 2 + (e_s0 - ms2) ** 2 + (e_z1 - mz2) ** 2 + (e_s1 - ms2) ** 2
+            mu2 = (moment - (mz2 * f0 - (ms2 - s_ref) * f2)) / den2
         for j in range(m):
             fs = fm0 + mu * (node[1, i, j, 2] - mz)
             fz = fm2 - mu * (node[1, i, j, 0] - ms)
+            if wl < 1.0:
+                fs *= wl
+                fz *= wl
+                if j == 0 or j == m - 1:
+                    fs += (1.0 - wl) * (0.5 * f0 + mu2 * (node[1, i, j, 2] - mz2))
+                    fz += (1.0 - wl) * (0.5 * f2 - mu2 * (node[1, i, j, 0] - ms2))
             node[0, i, j, 0] = fs * ex0 + fz * ez0
             node[0, i, j, 1] = fs * ex1 + fz * ez1
             node[0, i, j, 2] = fs * ex2 + fz * ez2
 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,
-                         x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0):
+                         x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0, luffing_cl=0.0):
     """Fields of :class:`kite_env.aero.loads.SectionLoads` from the compiled kernel (same arguments as
     :func:`kite_env.aero.loads.section_loads`, Eq. 2-9).
 
@@ -354,7 +373,7 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
                          np.ascontiguousarray(w), np.ascontiguousarray(v_kite, dtype=float),
                          np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c),
                          float(moment_chord_power), span,
-                         has_span, scal, vec, node, zeta, axes)
+                         has_span, scal, vec, node, zeta, axes, float(luffing_cl))
     alpha, cl, cd, cm, moment, s_ref, q_dyn, chord, t, kappa = scal
     lift, drag, v_app = vec
     nodal, local = node

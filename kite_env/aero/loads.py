@@ -123,7 +123,8 @@ _EY_CROSS = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
 _XZ = np.array([1.0, 0.0, 1.0])
 
 
-def distribute(local: np.ndarray, s_ref: np.ndarray, force_local: np.ndarray, moment: np.ndarray) -> np.ndarray:
+def distribute(local: np.ndarray, s_ref: np.ndarray, force_local: np.ndarray, moment: np.ndarray,
+               canopy_share: np.ndarray | None = None) -> np.ndarray:
     """Nodal forces reproducing each section's force and its moment about ``e_y`` (minimum-norm, module docstring).
 
     Works in section-frame components: node ``j`` at ``(s_j, y_j, z_j)`` from the LE node, reference point at
@@ -139,6 +140,10 @@ def distribute(local: np.ndarray, s_ref: np.ndarray, force_local: np.ndarray, mo
         Section force in section components (the e_y component, normally 0, is spread uniformly).
     moment : (n_sec,) float [N m]
         Moment about ``e_y`` through the reference point.
+    canopy_share : (n_sec,) float in [0, 1], optional
+        Luffing (``aero.luffing_cl``): the distribution is ``w f + (1 - w) f_edge`` with ``f_edge`` the same
+        minimum-norm law restricted to the LE and TE nodes; both reproduce the force and the moment, so the blend
+        does too. None or 1: ``f`` (the paper's distribution).
 
     Returns
     -------
@@ -152,7 +157,14 @@ def distribute(local: np.ndarray, s_ref: np.ndarray, force_local: np.ndarray, mo
     # g_mean · F with g_mean = (z_mean, 0, -(s_mean - s_ref))
     g_dot_f = mean[:, 2] * force_local[:, 0] - (mean[:, 0] - s_ref) * force_local[:, 2]
     mu = (moment - g_dot_f) / np.einsum("ijk,ijk,k->i", g_dev, g_dev, _XZ)
-    return (force_local * (1.0 / m))[:, None, :] + mu[:, None, None] * g_dev
+    f = (force_local * (1.0 / m))[:, None, :] + mu[:, None, None] * g_dev
+    if canopy_share is None:
+        return f
+    w = np.asarray(canopy_share, dtype=float)
+    ends = local[:, [0, m - 1]]
+    f_edge = np.zeros_like(f)
+    f_edge[:, [0, m - 1]] = distribute(ends, s_ref, force_local, moment)
+    return w[:, None, None] * f + (1.0 - w)[:, None, None] * f_edge
 
 
 def section_loads(
@@ -169,6 +181,7 @@ def section_loads(
     spanwise: np.ndarray | None = None,
     backend: str = "auto",
     moment_chord_power: float = 2.0,
+    luffing_cl: float = 0.0,
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -203,6 +216,11 @@ def section_loads(
         Power of the chord in Eq. (9), ``M = 1/2 rho CM c^p w V^2``: 2 (default) is the dimensionally consistent
         moment; 1 is the formula as printed in the paper (a moment per 1 m of reference length), kept for
         sensitivity studies (module docstring).
+    luffing_cl : float
+        0 (default): the paper's distribution. > 0: a section whose lift coefficient is below ``luffing_cl`` is
+        treated as luffing (a membrane cannot carry a reversed pressure difference): the share
+        ``w = clip(CL / luffing_cl, 0, 1)`` of its load stays on all nodes, the rest is carried by the LE and TE nodes
+        only (:func:`distribute`); force, moment and coefficients are unchanged. A modelling option, not the paper.
 
     Returns
     -------
@@ -210,7 +228,7 @@ def section_loads(
     """
     if resolve_backend(backend) == "numba":
         return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
-                                                  x_ref_over_c, spanwise, moment_chord_power))
+                                                  x_ref_over_c, spanwise, moment_chord_power, luffing_cl))
     x_sec = np.asarray(x_sec, dtype=float)
     geom = section_geometry(x_sec, tube_d, spanwise)
     v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt)
@@ -228,7 +246,8 @@ def section_loads(
     lift_loc = (k * CL)[:, None] * (u_loc @ _EY_CROSS.T)  # Eq. (7): (u_x, 0, u_z) -> (-u_z, 0, u_x)
     moment = hcw * speed2 * c ** (moment_chord_power - 1.0) * CM  # Eq. (9), with c^2 by default (module docstring)
     s_ref = x_ref_over_c * c - 0.5 * geom.tube_d  # reference point along e_x from the LE node
-    f_loc = distribute(geom.local, s_ref, lift_loc + drag_loc, moment)
+    share = np.clip(CL / luffing_cl, 0.0, 1.0) if luffing_cl > 0.0 else None
+    f_loc = distribute(geom.local, s_ref, lift_loc + drag_loc, moment, share)
     nodal = f_loc @ geom.frames.transpose(0, 2, 1)  # rows e_x, e_y, e_z: f = f_s e_x + f_z e_z
     return SectionLoads(
         nodal_forces=nodal, alpha=alpha, CL=CL, CD=CD, CM=CM, lift_local=lift_loc, drag_local=drag_loc,
@@ -249,6 +268,7 @@ def load_jacobian(
     x_ref_over_c: float = X_REF_OVER_C_DEFAULT,
     h: float = 1e-6,
     moment_chord_power: float = 2.0,
+    luffing_cl: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
 
@@ -273,7 +293,7 @@ def load_jacobian(
     n_sec, m, _ = x_sec.shape
     p = 3 * m
     base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c,
-                         moment_chord_power=moment_chord_power)
+                         moment_chord_power=moment_chord_power, luffing_cl=luffing_cl)
     tan = spanwise_directions(x_sec[:, 0])
     # stack: copy q perturbs coordinate q (= 3 b + l) of every section
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
@@ -286,7 +306,7 @@ def load_jacobian(
         xs.reshape(p * n_sec, m, 3), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
         v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
         None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan),
-        moment_chord_power=moment_chord_power)
+        moment_chord_power=moment_chord_power, luffing_cl=luffing_cl)
     df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
     return base.nodal_forces, df.transpose(1, 2, 0).copy()
 

@@ -245,3 +245,26 @@ def test_moment_as_printed_in_the_paper_scales_by_the_chord():
     np.testing.assert_allclose(b1.moment, a1.moment, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(b1.nodal_forces, a1.nodal_forces, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(a1.nodal_forces.sum(axis=1), a2.nodal_forces.sum(axis=1), rtol=1e-12, atol=1e-9)
+
+
+def test_luffing_option_moves_the_load_of_low_lift_sections_to_the_edges():
+    """aero.luffing_cl: both backends alike; per section the force and moment are those of the paper's distribution;
+    sections with CL >= luffing_cl keep it node for node, CL <= 0 loads only the LE and TE nodes, in between a blend."""
+    x, kw = case_args(*CASES[0][1:])
+    # per-section wind from -12 to +12 deg: sections below CL = 0, between 0 and 0.6, and above 0.6
+    kw = dict(kw, v_wind=np.stack([flow(25.0, a) for a in np.linspace(-12.0, 12.0, len(x))]))
+    ref = section_loads(x, D, W, rho=RHO, backend="numpy", **kw)
+    a, b = (section_loads(x, D, W, rho=RHO, backend=be, luffing_cl=0.6, **kw) for be in ("numpy", "numba"))
+    np.testing.assert_allclose(b.nodal_forces, a.nodal_forces, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(a.CL, ref.CL)
+    np.testing.assert_allclose(a.nodal_forces.sum(axis=1), ref.nodal_forces.sum(axis=1), rtol=1e-12, atol=1e-9)
+    arm = x - (x[:, :1] + a.s_ref[:, None, None] * a.geometry.frames[:, None, :, 0])  # from the reference point
+    m_a = np.einsum("ijk,ik->i", np.cross(arm, a.nodal_forces), a.geometry.frames[:, :, 1])
+    m_ref = np.einsum("ijk,ik->i", np.cross(arm, ref.nodal_forces), a.geometry.frames[:, :, 1])
+    np.testing.assert_allclose(m_a, m_ref, rtol=1e-9, atol=1e-9 * np.abs(m_ref).max())
+    full, off = a.CL >= 0.6, a.CL <= 0.0
+    assert full.any() and off.any() and ((~full) & (~off)).any()
+    np.testing.assert_array_equal(a.nodal_forces[full], ref.nodal_forces[full])
+    assert np.all(a.nodal_forces[off][:, 1:-1] == 0.0)
+    blend = ~full & ~off
+    assert np.all(np.abs(a.nodal_forces[blend][:, 1:-1]) <= np.abs(ref.nodal_forces[blend][:, 1:-1]) + 1e-12)
