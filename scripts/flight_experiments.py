@@ -73,9 +73,11 @@ def _variants():
             s.particles.cfg = dataclasses.replace(c, line_damping_Ns_per_m=c.line_damping_Ns_per_m * f)
         return m
 
-    def pair_damping(f):
+    def pair_damping(f, pairs=(0, 1, 2, 3)):
         def m(s):
-            s.particles.pair_damping = s.particles.pair_damping * f
+            c = s.particles.pair_damping.copy()
+            c[list(pairs)] *= f
+            s.particles.pair_damping = c
         return m
 
     def eq3_off(s):
@@ -93,6 +95,8 @@ def _variants():
 
     return {"hold": lambda s: None, "mB_x0.5": scale_te_mass(0.5), "mB_x2": scale_te_mass(2.0),
             "line_damp_x4": line_damping(4.0), "line_damp_x0": line_damping(0.0), "pair_damp_x100": pair_damping(100.0),
+            "pair_AC_x100": pair_damping(100.0, (0,)), "pair_BD_x100": pair_damping(100.0, (1,)),
+            "pair_diag_x100": pair_damping(100.0, (2, 3)), "pair_damp_x10": pair_damping(10.0),
             "eq3_off": eq3_off, "pc": coupling_pc, "kb_x0.5": kb(0.5), "kb_x1.5": kb(1.5)}
 
 
