@@ -21,6 +21,31 @@ PAPER_STEP_S = 5.3e-3  # mean RK45 step of the paper (Sect. IV) [s]
 PAPER_WALL_PER_STEP_MS = 27.5 / (1.0 / PAPER_STEP_S) * 1e3  # 27.5 s wall per s of flight -> ms per step
 
 
+def pin_to_one_core() -> None:
+    """Run the calling process on its first allowed CPU (the benchmarks report one-core figures); no-op where the
+    platform does not support affinity."""
+    import os
+
+    if os.name == "posix" and hasattr(os, "sched_setaffinity"):
+        try:
+            os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+        except OSError:
+            pass
+
+
+def write_json(out_dir, name: str, result: dict) -> None:
+    """Write ``result`` to ``out_dir/name`` (folder created) through a temporary file, so that an interrupted run
+    leaves no half-written file."""
+    import json
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".{name}.tmp"
+    tmp.write_text(json.dumps(result, indent=2))
+    tmp.replace(out / name)
+
+
 def bench_resolution(kite: str, n_sections: int, n_chord: int, n_steps: int = 100, cfg: Config | None = None,
                      airspeed: float = 25.0, alpha_deg: float = 16.0) -> dict:
     """Time one cold solve and ``n_steps`` warm steps of one mesh resolution."""

@@ -35,6 +35,7 @@ from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteM
 from kite_env.structure import rotations, tube
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
+from kite_env.structure.kernels import tube_secants
 from kite_env.structure.shell import ShellSet
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
 
@@ -237,26 +238,22 @@ class AeroelasticWing:
 
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
+        p = self.tube_props
         l, th = self.beams.local_rotations(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
         if self.beams.backend == "numba":  # the same formulas in one compiled loop (tested against the lines below)
-            from kite_env.structure.kernels import tube_secants
-
-            p, n_t = self.tube_props, self._tube_rows.size
+            n_t = self._tube_rows.size
             EI, GJ, col = np.empty(n_t), np.empty(n_t), np.empty(n_t, dtype=np.bool_)
             tube_secants(th, l, self._tube_rows, p.EI0, p.M_max, p.kappa_collapse, p.GJ0, p.c2, EI, GJ, col)
-            self.beams.set_bending_torsion(self._tube_rows, EI, GJ)
-            collapsed = np.zeros(len(self.mesh.beams), bool)
-            collapsed[tb] = col
-            return collapsed
-        th1, th2, L = th[tb, 0], th[tb, 1], l[tb][:, None]
-        # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs the secant
-        kappa = np.maximum(np.linalg.norm(-(4 * th1[:, 1:] + 2 * th2[:, 1:]) / L, axis=1),
-                           np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L, axis=1))
-        phi = np.abs(th2[:, 0] - th1[:, 0]) / L[:, 0]
-        self.beams.set_bending_torsion(self._tube_rows, tube.secant_EI(self.tube_props, kappa),
-                                       tube.secant_GJ(self.tube_props, phi))
+        else:
+            th1, th2, L = th[tb, 0], th[tb, 1], l[tb][:, None]
+            # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs the secant
+            kappa = np.maximum(np.linalg.norm(-(4 * th1[:, 1:] + 2 * th2[:, 1:]) / L, axis=1),
+                               np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L, axis=1))
+            phi = np.abs(th2[:, 0] - th1[:, 0]) / L[:, 0]
+            EI, GJ, col = tube.secant_EI(p, kappa), tube.secant_GJ(p, phi), tube.collapsed(p, kappa)
+        self.beams.set_bending_torsion(self._tube_rows, EI, GJ)
         collapsed = np.zeros(len(self.mesh.beams), bool)
-        collapsed[tb] = tube.collapsed(self.tube_props, kappa)
+        collapsed[tb] = col
         return collapsed
 
     def _aero(self, state: NodalState, flight: FlightState, dt: float | None):
@@ -488,7 +485,7 @@ class AeroelasticWing:
 
     def _without_lines(self, state, fi_b):
         """Internal force at A-D (4, 3) without the bridle-line elements of ``support="lines"``."""
-        return fi_b - self.lines.internal(state.x[self.bridle][:, None, :], None)[0][:, :3]
+        return fi_b - self.lines.internal(state.x[self.bridle][:, None, :], None, tangent=False)[0][:, :3]
 
     def _update_line_tensions(self, state, F_b) -> float:
         """Line tension T = pull of the wing along its line (Eq. 1, second block, projected on the line); sets the
@@ -528,13 +525,15 @@ class BridleLines:
         self.anchor = np.zeros((len(self.conn), 3))
         self.tension = np.ones(len(self.conn))
 
-    def internal(self, x_e, R_e):
+    def internal(self, x_e, R_e, tangent: bool = True):
         d = x_e[:, 0] - self.anchor
         l = np.linalg.norm(d, axis=1)
         e = d / l[:, None]
         n = len(l)
         f = np.zeros((n, 6))
         f[:, :3] = self.tension[:, None] * e
+        if not tangent:
+            return f, None
         K = np.zeros((n, 6, 6))
         K[:, :3, :3] = (self.tension / l)[:, None, None] * (np.eye(3) - e[:, :, None] * e[:, None, :])
         return f, K

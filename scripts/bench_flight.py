@@ -12,10 +12,8 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -32,21 +30,15 @@ def main(argv=None) -> int:
     if not (args.duration > 0 and all(d > 0 for d in dts)):
         print("bench_flight: error: --duration and --dt-ms must be positive", file=sys.stderr)
         return 2
-    if os.name == "posix" and hasattr(os, "sched_setaffinity"):
-        try:
-            os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-        except OSError:
-            pass
-    from kite_env.benchmark import PAPER_REAL_TIME_FACTOR, bench_flight, format_flight_table
+    from kite_env.benchmark import (PAPER_REAL_TIME_FACTOR, bench_flight, format_flight_table, pin_to_one_core,
+                                    write_json)
+
+    pin_to_one_core()
 
     rows = bench_flight(duration_s=args.duration, dt_values=dts)
     result = {"flight": rows, "paper_real_time_factor": PAPER_REAL_TIME_FACTOR,
               "machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / ".bench_flight.json.tmp"
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out / "bench_flight.json")
+    write_json(args.out, "bench_flight.json", result)
     print(format_flight_table(rows))
     print(f"paper (Matlab, RK45 mean step 5.3 ms): {PAPER_REAL_TIME_FACTOR} s wall per simulated second; target 1.0")
     return 0

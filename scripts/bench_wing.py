@@ -12,7 +12,6 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -35,12 +34,9 @@ def main(argv=None) -> int:
     if args.steps < 1:
         print("bench_wing: error: --steps must be >= 1", file=sys.stderr)
         return 2
-    if os.name == "posix" and hasattr(os, "sched_setaffinity"):
-        try:
-            os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-        except OSError:
-            pass
-    from kite_env.benchmark import PAPER_WALL_PER_STEP_MS, bench_resolution, format_table
+    from kite_env.benchmark import PAPER_WALL_PER_STEP_MS, bench_resolution, format_table, pin_to_one_core, write_json
+
+    pin_to_one_core()
 
     rows = []
     for ns, nc in res:
@@ -51,15 +47,11 @@ def main(argv=None) -> int:
     result["resolutions"] = rows
     result["paper_wall_per_step_ms"] = PAPER_WALL_PER_STEP_MS
     result["machine"] = {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / ".bench_wing.json.tmp"
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out / "bench_wing.json")
+    write_json(args.out, "bench_wing.json", result)
     print(format_table(rows))
     print(f"paper (Matlab, RK45 mean step 5.3 ms): {PAPER_WALL_PER_STEP_MS:.0f} ms wall per step; "
           f"target: warm step < 5 ms at 37x6")
-    print(f"wrote {out / 'bench_wing.json'}")
+    print(f"wrote {Path(args.out) / 'bench_wing.json'}")
     return 0
 
 

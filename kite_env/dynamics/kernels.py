@@ -301,6 +301,27 @@ def pair_index(q):
 
 
 @njit(**_JIT)
+def _pair_difference(x, m, i, j):
+    """Inverse masses ``1/m_i, 1/m_j`` and the difference ``x_i - x_j`` of a constraint pair (``j < 0``: the ground
+    station at the origin, no mass)."""
+    if j < 0:
+        return 1.0 / m[i], 0.0, x[i, 0], x[i, 1], x[i, 2]
+    return 1.0 / m[i], 1.0 / m[j], x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+
+
+@njit(**_JIT)
+def _pair_update(x, i, j, wi, wj, s, d0, d1, d2):
+    """``x_i -= w_i s d``, ``x_j += w_j s d`` in place (the mass-weighted correction of one constraint)."""
+    x[i, 0] -= wi * s * d0
+    x[i, 1] -= wi * s * d1
+    x[i, 2] -= wi * s * d2
+    if j >= 0:
+        x[j, 0] += wj * s * d0
+        x[j, 1] += wj * s * d1
+        x[j, 2] += wj * s * d2
+
+
+@njit(**_JIT)
 def project_constraints(r, v, m, tether_length, tip_lengths, iters):
     """Mass-weighted projection of positions (``iters`` passes), then velocities, onto the tether and tip-beam
     distance constraints: :meth:`kite_env.dynamics.particles.ParticleSystem.project` in scalar loops.
@@ -318,38 +339,13 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters):
     for _ in range(iters):
         for c in range(3):
             i, j, L = pairs_i[c], pairs_j[c], lengths[c]
-            d0, d1, d2 = r[i, 0], r[i, 1], r[i, 2]
-            wi = 1.0 / m[i]
-            wj = 0.0
-            if j >= 0:
-                d0, d1, d2 = d0 - r[j, 0], d1 - r[j, 1], d2 - r[j, 2]
-                wj = 1.0 / m[j]
+            wi, wj, d0, d1, d2 = _pair_difference(r, m, i, j)
             dd = d0 * d0 + d1 * d1 + d2 * d2
-            s = (0.5 * (dd - L * L)) / (dd * (wi + wj))
-            r[i, 0] -= wi * s * d0
-            r[i, 1] -= wi * s * d1
-            r[i, 2] -= wi * s * d2
-            if j >= 0:
-                r[j, 0] += wj * s * d0
-                r[j, 1] += wj * s * d1
-                r[j, 2] += wj * s * d2
+            _pair_update(r, i, j, wi, wj, (0.5 * (dd - L * L)) / (dd * (wi + wj)), d0, d1, d2)
     for c in range(3):
         i, j = pairs_i[c], pairs_j[c]
-        d0, d1, d2 = r[i, 0], r[i, 1], r[i, 2]
-        u0, u1, u2 = v[i, 0], v[i, 1], v[i, 2]
-        wi = 1.0 / m[i]
-        wj = 0.0
-        if j >= 0:
-            d0, d1, d2 = d0 - r[j, 0], d1 - r[j, 1], d2 - r[j, 2]
-            u0, u1, u2 = u0 - v[j, 0], u1 - v[j, 1], u2 - v[j, 2]
-            wj = 1.0 / m[j]
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        s = (d0 * u0 + d1 * u1 + d2 * u2) / (dd * (wi + wj))
-        v[i, 0] -= wi * s * d0
-        v[i, 1] -= wi * s * d1
-        v[i, 2] -= wi * s * d2
-        if j >= 0:
-            v[j, 0] += wj * s * d0
-            v[j, 1] += wj * s * d1
-            v[j, 2] += wj * s * d2
+        wi, wj, d0, d1, d2 = _pair_difference(r, m, i, j)
+        _, _, u0, u1, u2 = _pair_difference(v, m, i, j)
+        _pair_update(v, i, j, wi, wj, (d0 * u0 + d1 * u1 + d2 * u2) / ((d0 * d0 + d1 * d1 + d2 * d2) * (wi + wj)),
+                     d0, d1, d2)
     return r, v

@@ -1,7 +1,8 @@
 """Vectorised global assembly of element sets with a sparsity pattern built once.
 
 Every element set (:class:`kite_env.structure.beam.BeamSet`, :class:`kite_env.structure.shell.ShellSet`, ...)
-exposes ``conn`` (n_e, n_en) and ``internal(x_e, R_e) -> (f_e, K_e)`` with 6 DOF per node ``[du, dw]``.
+exposes ``conn`` (n_e, n_en) and ``internal(x_e, R_e, tangent=True) -> (f_e, K_e)`` with 6 DOF per node
+``[du, dw]``; with ``tangent=False`` a set may return ``K_e = None`` (residual-only assemblies).
 The :class:`Assembler` precomputes, once, the compressed-sparse-column (CSC) structure of the global tangent
 and for every element-matrix entry the position of its value in the CSC data array. An assembly is then one
 ``np.bincount`` for the internal force and one for the matrix values: no Python loop over elements and no
@@ -41,7 +42,7 @@ class Assembler:
     n_nodes : int
         Number of structural nodes; the global system has ``6 n_nodes`` DOF.
     sets : list
-        Element sets, each with ``conn`` and ``internal(x_e, R_e)``.
+        Element sets, each with ``conn`` and ``internal(x_e, R_e, tangent)``.
     extra_blocks : (n_b, n_bn) int array, optional
         Node groups whose translational DOF couple in matrices added to the tangent from outside the element sets
         (the aerodynamic load Jacobian of each wing section, :mod:`kite_env.fsi`). Their entries are made part of
@@ -135,10 +136,7 @@ class Assembler:
         data = np.zeros(self.nnz) if tangent else None
         for s, dofs, kmap in zip(self.sets, self._set_dofs, self._set_maps):
             conn = s.conn
-            if not tangent and getattr(s, "supports_residual_only", False):
-                f_e, K_e = s.internal(x[conn], Rn[conn], tangent=False)
-            else:
-                f_e, K_e = s.internal(x[conn], Rn[conn])
+            f_e, K_e = s.internal(x[conn], Rn[conn], tangent=tangent)
             if self._scatter is not None:
                 self._scatter(f_int, dofs, f_e.ravel())
                 if tangent:

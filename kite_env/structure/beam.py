@@ -232,9 +232,6 @@ class BeamSet:
         return m1, m2
 
     # ------------------------------------------------------------------------------------------ forces
-    #: :meth:`internal` accepts ``tangent=False`` (read by the Assembler)
-    supports_residual_only = True
-
     def internal(self, x_e, R_e, tangent: bool = True):
         """Internal force and consistent tangent of every element.
 

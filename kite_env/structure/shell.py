@@ -135,9 +135,6 @@ class ShellSet:
             U = U + 0.5 * np.einsum("ni,nij,nj->n", th, self.K_l, th)
         return U
 
-    #: :meth:`internal` accepts ``tangent=False`` (read by the Assembler)
-    supports_residual_only = True
-
     def internal(self, x_e, R_e, tangent: bool = True):
         """Internal force and consistent tangent of every element.
 
