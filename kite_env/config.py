@@ -121,6 +121,33 @@ class SimConfig:
     initial_speed_mps: float = 22.0  # initial flight speed along the path [m/s]
 
 
+#: observation terms of the Gymnasium environment (kite_env.envs), in the order they are stacked
+OBSERVATION_TERMS = ("position", "heading", "line_forces", "path", "rates", "actuator")
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    # Gymnasium environment (kite_env.envs): episode, observation, reward and randomisation of the start
+    max_episode_s: float = 60.0  # simulated time limit of an episode (truncation) [s]
+    force_controller: bool = True  # the paper's force controller (Eq. 18-19) runs inside the env
+    observation: str = "position,heading,line_forces,path,rates,actuator"  # terms, comma-separated (OBSERVATION_TERMS)
+    force_scale_N: float = 5000.0  # line and tether forces are observed divided by this [N]
+    w_tracking: float = 1.0  # weight of the tracking reward exp(-(delta / tracking_scale)^2) per step [-]
+    tracking_scale_deg: float = 5.0  # distance to the figure-eight at which the tracking reward is 1/e [deg]
+    w_traction: float = 0.5  # weight of the traction reward F_tether / traction_ref per step [-]
+    traction_ref_N: float = 5000.0  # [N]
+    w_action_rate: float = 0.1  # weight of the penalty (a_k - a_k-1)^2 per step [-]
+    crash_penalty: float = 50.0  # reward -crash_penalty on a physical failure (terminated) [-]
+    slack_tether_N: float = 50.0  # a tether force below this ends the episode (slack tether) [N]
+    wind_speed_min_mps: float = 5.0  # wind speed drawn uniformly per episode from [min, max] [m/s]
+    wind_speed_max_mps: float = 5.0  # [m/s]
+    turbulence_intensity_max: float = 0.0  # turbulence intensity drawn uniformly from [0, max] per episode [-]
+    random_start: bool = False  # start at a random point of the figure-eight (else at the crossing, like kite-eval)
+    initial_speed_min_mps: float = 22.0  # initial speed along the path drawn from [min, max] [m/s]
+    initial_speed_max_mps: float = 22.0  # [m/s]
+    reset_attempts: int = 5  # draws of the start before reset() gives up (the wing must converge at the start) [-]
+
+
 @dataclass(frozen=True)
 class Config:
     kite: KiteConfig = field(default_factory=KiteConfig)
@@ -132,6 +159,7 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
     wind: WindConfig = field(default_factory=WindConfig)
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
@@ -148,13 +176,17 @@ _POSITIVE = {
     "dynamics.mass_le_kg", "dynamics.mass_te_kg", "dynamics.mass_kcu_kg", "dynamics.line_diameter_m",
     "dynamics.line_stiffness_N_per_m", "dynamics.power_line_length_m", "dynamics.tether_length_m", "dynamics.dt_s",
     "dynamics.baumgarte_1_per_s", "control.k2", "control.delta_l_max_m", "control.beta_distance_deg",
-    "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps",
+    "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps", "env.max_episode_s", "env.force_scale_N",
+    "env.tracking_scale_deg", "env.traction_ref_N", "env.initial_speed_min_mps", "env.initial_speed_max_mps",
+    "env.reset_attempts",
 }
 # values that must be >= 0
 _NON_NEGATIVE = {
     "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
-    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "aero.luffing_cl",
+    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "aero.luffing_cl", "env.w_tracking",
+    "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
+    "env.wind_speed_max_mps", "env.turbulence_intensity_max",
 }
 
 
@@ -255,6 +287,18 @@ def _validate(cfg: Config) -> None:
         raise ConfigError(f"config key 'kite.n_sections' must be odd and >= 7, got {cfg.kite.n_sections}")
     if cfg.kite.n_chord < 3:
         raise ConfigError(f"config key 'kite.n_chord' must be >= 3, got {cfg.kite.n_chord}")
+    env = cfg.env
+    for lo, hi in (("wind_speed_min_mps", "wind_speed_max_mps"), ("initial_speed_min_mps", "initial_speed_max_mps")):
+        if getattr(env, lo) > getattr(env, hi):
+            raise ConfigError(f"config key 'env.{lo}' must not exceed 'env.{hi}', got {getattr(env, lo)} > "
+                              f"{getattr(env, hi)}")
+    terms = [t.strip() for t in env.observation.split(",") if t.strip()]
+    bad = [t for t in terms if t not in OBSERVATION_TERMS]
+    if bad or not terms or len(set(terms)) != len(terms):
+        raise ConfigError(f"config key 'env.observation' must list distinct terms of {', '.join(OBSERVATION_TERMS)} "
+                          f"separated by commas, got {env.observation!r}")
+    if env.max_episode_s < cfg.control.control_dt_s:
+        raise ConfigError(f"config key 'env.max_episode_s' must be at least control.control_dt_s, got {env.max_episode_s}")
 
 
 def parse_overrides(overrides: Iterable[str]) -> dict[str, dict[str, Any]]:

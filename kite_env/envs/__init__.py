@@ -1,0 +1,15 @@
+"""Gymnasium environments of kite_env (registered on ``import kite_env``); the physics modules never import gymnasium.
+
+* ``KiteFigureEight-v0``: :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`, the full aeroelastic model.
+"""
+
+ENV_ID = "KiteFigureEight-v0"
+
+
+def register_envs() -> None:
+    """Register the environments with Gymnasium (idempotent)."""
+    from gymnasium.envs.registration import register, registry
+
+    if ENV_ID not in registry:
+        # no TimeLimit wrapper: the env truncates itself at env.max_episode_s (the step count depends on the config)
+        register(id=ENV_ID, entry_point="kite_env.envs.figure_eight:KiteFigureEightEnv")

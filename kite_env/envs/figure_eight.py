@@ -1,0 +1,354 @@
+"""``KiteFigureEight-v0``: fly the aeroelastic kite along the figure-eight (Gymnasium environment).
+
+The environment wraps the complete coupled model of :mod:`kite_env.dynamics.simulator` (static aeroelastic wing
+solved at every time step inside the particle system of wing masses, bridle, KCU and tether). Nothing in the physics
+modules imports gymnasium; this module is the only bridge.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
+from kite_env.control import LineActuator
+from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
+from kite_env.flight import GROUND_ELEVATION_RAD
+from kite_env.trajectory import Lemniscate, heading_angle, sphere_basis, wrap_angle
+from kite_env.wind import WindField
+
+#: observation terms: (size, lower bound, upper bound) of each entry
+_TERM_SPECS = {
+    "position": (3, -1.0, 1.0),  # R_k, the KCU direction on the unit sphere (frame W)
+    "heading": (2, -1.0, 1.0),  # sin psi, cos psi of the nose -x_k on the sphere
+    "line_forces": (5, 0.0, 10.0),  # F_c of the lines A, B, C, D and the tether force, / force_scale_N
+    "path": (5, -math.pi, math.pi),  # signed distance [rad], sin/cos(psi_t - psi), sin/cos of the path parameter s
+    "rates": (4, -10.0, 10.0),  # angular velocity on the sphere (x_s, y_s) [rad/s], yaw rate [rad/s], speed / 25 m/s
+    "actuator": (3, -5.0, 5.0),  # last action, actual (l_B - l_D) / dl_max, force ratio mu
+}
+V_SCALE_MPS = 25.0
+
+
+def observation_layout(terms: str | tuple[str, ...]) -> dict[str, slice]:
+    """Slices of the observation vector for each term of ``env.observation`` (in its order)."""
+    names = [t.strip() for t in terms.split(",") if t.strip()] if isinstance(terms, str) else list(terms)
+    out, i = {}, 0
+    for name in names:
+        if name not in _TERM_SPECS:
+            raise ValueError(f"unknown observation term {name!r} (valid: {', '.join(OBSERVATION_TERMS)})")
+        n = _TERM_SPECS[name][0]
+        out[name] = slice(i, i + n)
+        i += n
+    return out
+
+
+class KiteFigureEightEnv(gym.Env):
+    """Steer a flexible leading-edge-inflatable kite along a figure-eight with the steering lines.
+
+    ## Description
+
+    The full aeroelastic model of Bosch et al. (static nonlinear FE wing with Breukels' aerodynamics, solved at every
+    physics step inside a particle model of wing masses, bridle lines, kite control unit and an 80 m tether). The
+    agent sets the desired steering-line length difference; the paper's inner steering-line loops (Eq. 16-17) and,
+    by default, its force controller (Eq. 18-19) turn it into rest lengths of the steering lines. The task is to fly
+    the Bernoulli lemniscate on the unit sphere (``trajectory`` section of the config) with a high traction force.
+
+    ## Action Space
+
+    ``Box(-1, 1, (1,), float32)``: desired ``dl* = l_B - l_D`` divided by ``control.delta_l_max_m`` (0.25 m by
+    default). ``dl* < 0`` pulls the right steering line and turns the kite to its right. The action is held for
+    ``control.control_dt_s`` (0.02 s, four physics steps of ``dynamics.dt_s``).
+
+    ## Observation Space
+
+    ``Box(low, high, (n,), float32)`` with finite bounds, stacked from the terms listed in ``env.observation``
+    (all by default, n = 22):
+
+    | term          | size | content                                                                      |
+    |---------------|------|------------------------------------------------------------------------------|
+    | `position`    | 3    | KCU direction ``R_k`` on the unit sphere (wind frame W: x downwind, z up)    |
+    | `heading`     | 2    | sin, cos of the heading ``psi`` of the nose on the sphere (0 = to the zenith) |
+    | `line_forces` | 5    | tensions of the bridle lines A, B, C, D and the tether / ``env.force_scale_N`` |
+    | `path`        | 5    | signed geodesic distance to the figure-eight [rad] (> 0 left of the path),   |
+    |               |      | sin, cos of (path heading - psi) at the nearest point, sin, cos of its phase |
+    | `rates`       | 4    | angular velocity on the sphere along x_s, y_s [rad/s], yaw rate [rad/s],     |
+    |               |      | flight speed / 25 m/s                                                        |
+    | `actuator`    | 3    | last action, actual ``(l_B - l_D) / delta_l_max``, force ratio ``mu``        |
+
+    Values are clipped to the bounds (which they reach only in failing flights).
+
+    ## Rewards
+
+    Per step, the sum of the terms reported in ``info``: ``reward_tracking = w_tracking exp(-(delta / scale)^2)``
+    (``delta`` the distance to the figure-eight, ``scale = env.tracking_scale_deg``), ``reward_traction =
+    w_traction F_tether / traction_ref_N``, ``reward_action = -w_action_rate (a_k - a_{k-1})^2`` and, on a physical
+    failure, ``reward_crash = -crash_penalty``.
+
+    ## Starting State
+
+    The KCU at the crossing of the figure-eight (or a uniformly drawn path point with ``env.random_start``), flying
+    along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]``; the wing in
+    static aeroelastic equilibrium on its bridle. Wind speed, turbulence intensity and turbulence realisation are drawn
+    from ``self.np_random`` (ranges in the ``env`` section).
+
+    ## Episode End
+
+    ``terminated``: ground contact (KCU below 3 deg elevation), slack tether (force below ``env.slack_tether_N``),
+    a wing solve that does not converge, or a non-finite state; ``info["termination_reason"]`` says which.
+    ``truncated``: at ``env.max_episode_s`` of simulated time.
+
+    ## Arguments
+
+    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None)``: ``config`` is a
+    :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
+    ``"section.key=value"`` strings applied on top. ``render_mode`` is ``"rgb_array"`` (flight path and deformed
+    wing as a uint8 image) or ``"human"`` (the same in a matplotlib window).
+
+    ## Version History
+
+    * v0: first version (full aeroelastic fidelity).
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+
+    def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None):
+        if isinstance(config, Config):
+            base = config
+        elif isinstance(config, dict):
+            base = config_from_dict(config)
+        elif config is None or isinstance(config, (str, os.PathLike)):
+            base = load_config(config)
+        else:
+            raise ConfigError(f"config must be a Config, a dict or a YAML path, got {type(config).__name__}")
+        cfg = config_from_dict(parse_overrides(overrides), base)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.cfg = cfg
+        self.render_mode = render_mode
+        self.path = Lemniscate(cfg.trajectory)
+        self.layout = observation_layout(cfg.env.observation)
+        lo = np.concatenate([np.full(_TERM_SPECS[t][0], _TERM_SPECS[t][1]) for t in self.layout]).astype(np.float32)
+        hi = np.concatenate([np.full(_TERM_SPECS[t][0], _TERM_SPECS[t][2]) for t in self.layout]).astype(np.float32)
+        self.observation_space = spaces.Box(lo, hi, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.n_physics = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
+        self.control_dt = self.n_physics * cfg.dynamics.dt_s
+        self.max_steps = int(math.ceil(cfg.env.max_episode_s / self.control_dt - 1e-9))
+        ctrl = cfg.control if cfg.env.force_controller else _without_force_loop(cfg)
+        self._ctrl_cfg = ctrl
+        self.sim: FlightSimulator | None = None  # built on the first reset (the wing mesh is reused afterwards)
+        self.rec: StepRecord | None = None
+        self._trail: list[np.ndarray] = []
+        self._fig = None
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        env = self.cfg.env
+        last_error = None
+        for _ in range(env.reset_attempts):
+            rng = self.np_random
+            wind_speed = float(rng.uniform(env.wind_speed_min_mps, env.wind_speed_max_mps))
+            ti = float(rng.uniform(0.0, env.turbulence_intensity_max)) if env.turbulence_intensity_max > 0 else 0.0
+            wind_seed = int(rng.integers(0, 2**31 - 1))
+            s0 = float(rng.uniform(0.0, 2.0 * math.pi)) if env.random_start else 0.0
+            v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
+            wind_cfg = _replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)
+            wind = WindField(wind_cfg)
+            if self.sim is None:
+                self.sim = FlightSimulator(self.cfg, wind)
+            else:
+                self.sim.wind = wind
+            try:
+                self.rec = self.sim.reset(self.path.point(s0), self.path.tangent(s0), v0)
+                break
+            except SimulationError as exc:
+                last_error = exc
+        else:
+            raise RuntimeError(f"reset failed {env.reset_attempts} times: the wing did not converge at the drawn "
+                               f"start ({last_error})")
+        self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
+        self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
+        self.s_hint = s0
+        self.last_action = 0.0
+        self.steps = 0
+        self.episode_info = {"wind_speed_mps": wind_speed, "turbulence_intensity": ti, "wind_seed": wind_seed,
+                             "start_s": s0, "initial_speed_mps": v0}
+        self._trail = [self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4])]
+        obs, feats = self._observe(self.rec)
+        if not np.all(np.isfinite(obs)):
+            raise RuntimeError(f"reset produced a non-finite observation: {obs}")
+        obs = np.clip(obs, self.observation_space.low, self.observation_space.high)
+        info = {**self.episode_info, **feats}
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action):
+        if self.rec is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.size != 1:
+            raise ValueError(f"action must have one element, got shape {np.shape(action)}")
+        a = float(a[0])
+        if not math.isfinite(a):
+            raise ValueError(f"action must be finite, got {a!r}")
+        a = min(1.0, max(-1.0, a))
+        cfg = self.cfg
+        dl_star = a * cfg.control.delta_l_max_m
+        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
+        reason = None
+        for _ in range(self.n_physics):
+            try:
+                rec = self.sim.step(self.L_B, self.L_D)
+            except SimulationError as exc:
+                reason = exc.reason
+                break
+            self.rec = rec
+            r_kcu = rec.state.r[4]
+            if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * cfg.dynamics.tether_length_m:
+                reason = "ground"
+                break
+            if rec.tether_force < cfg.env.slack_tether_N:
+                reason = "slack tether"
+                break
+        self.steps += 1
+        obs, feats = self._observe(self.rec)
+        if reason is None and not np.all(np.isfinite(obs)):
+            reason = "non-finite state"
+        env = cfg.env
+        terms = {
+            "reward_tracking": env.w_tracking * math.exp(-(feats["path_distance_rad"]
+                                                           / math.radians(env.tracking_scale_deg)) ** 2),
+            "reward_traction": env.w_traction * feats["tether_force_N"] / env.traction_ref_N,
+            "reward_action": -env.w_action_rate * (a - self.last_action) ** 2,
+            "reward_crash": -env.crash_penalty if reason is not None else 0.0,
+        }
+        if reason is not None:
+            terms["reward_tracking"] = terms["reward_traction"] = 0.0
+        self.last_action = a
+        reward = float(sum(terms.values()))
+        terminated = reason is not None
+        truncated = (not terminated) and self.steps >= self.max_steps
+        obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+        obs = np.clip(obs, self.observation_space.low, self.observation_space.high)
+        info = {**terms, **feats, "delta_l_star_m": ainfo["delta_l_star"], "L_B_m": self.L_B, "L_D_m": self.L_D,
+                "termination_reason": reason if terminated else ("time limit" if truncated else None)}
+        self._trail.append(self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4]))
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ observation
+    def _observe(self, rec: StepRecord):
+        cfg = self.cfg
+        r_kcu = rec.state.r[4]
+        R = r_kcu / np.linalg.norm(r_kcu)
+        nose = -rec.R_wk[:, 0]
+        psi = float(heading_angle(R, nose))
+        near = self.path.nearest(R, self.s_hint)
+        self.s_hint = near.s
+        left = np.cross(near.point, near.e_t)
+        signed = -near.distance_rad * math.copysign(1.0, float(near.e_n @ left))
+        psi_t = float(heading_angle(near.point, near.e_t))
+        dpsi = float(wrap_angle(psi_t - psi))
+        x_s, y_s = sphere_basis(R)
+        v_kcu = rec.state.v[4]
+        w_s = (v_kcu - (v_kcu @ R) * R) / cfg.dynamics.tether_length_m
+        yaw_rate = float(rec.R_wk[:, 2] @ rec.omega)
+        speed = float(np.linalg.norm(rec.v_kite))
+        mu = LineActuator.force_ratio(rec.line_tension)
+        dl = float(rec.line_length[1] - rec.line_length[3])
+        fs = cfg.env.force_scale_N
+        # the record of a reset has no tether constraint force yet: the bridle lines' sum stands in for it
+        tether = float(rec.tether_force) if math.isfinite(rec.tether_force) else float(np.sum(rec.line_tension))
+        parts = {
+            "position": R,
+            "heading": (math.sin(psi), math.cos(psi)),
+            "line_forces": np.append(rec.line_tension, tether) / fs,
+            "path": (signed, math.sin(dpsi), math.cos(dpsi), math.sin(near.s), math.cos(near.s)),
+            "rates": (float(w_s @ x_s), float(w_s @ y_s), yaw_rate, speed / V_SCALE_MPS),
+            "actuator": (self.last_action, dl / cfg.control.delta_l_max_m, mu),
+        }
+        obs = np.concatenate([np.asarray(parts[t], dtype=np.float64).ravel() for t in self.layout]).astype(np.float32)
+        feats = {"t": float(rec.t), "path_distance_rad": float(near.distance_rad),
+                 "path_distance_deg": math.degrees(near.distance_rad), "path_s": float(near.s),
+                 "tether_force_N": tether, "speed_mps": speed, "heading_rad": psi,
+                 "yaw_rate_rad_s": yaw_rate, "force_ratio_mu": mu, "delta_l_m": dl,
+                 "elevation_deg": math.degrees(math.asin(max(-1.0, min(1.0, float(R[2]))))),
+                 "azimuth_deg": math.degrees(math.atan2(float(R[1]), float(R[0])))}
+        return obs, feats
+
+    # ------------------------------------------------------------------ rendering
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode (use render_mode='rgb_array' or 'human')")
+            return None
+        if self.rec is None:
+            raise RuntimeError("call reset() before render()")
+        import matplotlib
+
+        if self.render_mode == "rgb_array":
+            from matplotlib.backends.backend_agg import FigureCanvasAgg
+            from matplotlib.figure import Figure
+
+            fig = Figure(figsize=(8, 4), dpi=80)
+            FigureCanvasAgg(fig)
+            self._draw(fig)
+            fig.canvas.draw()
+            return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        import matplotlib.pyplot as plt
+
+        if self._fig is None or not plt.fignum_exists(self._fig.number):
+            self._fig = plt.figure(figsize=(8, 4))
+        self._fig.clf()
+        self._draw(self._fig)
+        if matplotlib.get_backend().lower() != "agg":
+            plt.pause(1.0 / self.metadata["render_fps"])
+        return None
+
+    def _draw(self, fig) -> None:
+        s = np.linspace(0.0, 2.0 * math.pi, 400)
+        P = self.path.point(s)
+        trail = np.asarray(self._trail)
+        ax = fig.add_subplot(1, 2, 1)
+        ax.plot(np.degrees(np.arctan2(P[:, 1], P[:, 0])), np.degrees(np.arcsin(P[:, 2])), "k--", lw=0.8)
+        ax.plot(np.degrees(np.arctan2(trail[:, 1], trail[:, 0])), np.degrees(np.arcsin(trail[:, 2])), "C0", lw=1.2)
+        ax.plot(np.degrees(math.atan2(trail[-1, 1], trail[-1, 0])), np.degrees(math.asin(trail[-1, 2])), "C3o")
+        ax.set_xlabel("azimuth [deg]")
+        ax.set_ylabel("elevation [deg]")
+        ax.set_title(f"t = {self.rec.t:.2f} s, tether {self.rec.tether_force / 1e3:.1f} kN", fontsize=9)
+        ax.invert_xaxis()
+        ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+        mesh = self.sim.wing.mesh
+        x = self.rec.wing.nodes
+        for sec in mesh.sections:
+            ax3.plot(x[sec, 0], x[sec, 1], x[sec, 2], "C0", lw=0.7)
+        ax3.plot(x[mesh.sections[:, 0], 0], x[mesh.sections[:, 0], 1], x[mesh.sections[:, 0], 2], "k", lw=1.2)
+        ax3.set_title("deformed wing (kite frame)", fontsize=9)
+        ax3.set_box_aspect((1, 3, 1))
+        ax3.view_init(elev=25, azim=-60)
+        ax3.set_axis_off()
+
+    def close(self):
+        if self._fig is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._fig)
+            self._fig = None
+
+
+def _replace(obj, **kw):
+    import dataclasses
+
+    return dataclasses.replace(obj, **kw)
+
+
+def _without_force_loop(cfg: Config):
+    import dataclasses
+
+    return dataclasses.replace(cfg.control, k3_m=0.0)
