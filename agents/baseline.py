@@ -67,3 +67,67 @@ class BaselinePolicy:
         dl_star = self.cfg.k1_m_per_rad * err  # Eq. (15)
         return dl_star, {"s": near.s, "delta_rad": near.distance_rad, "beta": beta, "psi": psi,
                          "psi_star": psi_star, "heading_error": err}
+
+
+class BaselineAgent:
+    """The paper's controller behind Stable-Baselines3's ``predict`` interface, so that the baseline and trained
+    agents go through one evaluation path (:class:`kite_env.envs.figure_eight.KiteFigureEightEnv` observations).
+
+    It reads the raw (not normalised) observation: the terms ``position``, ``heading`` and ``rates`` (for the speed
+    of the blending law) must be in ``env.observation``; ``path`` (its phase) picks the branch of the figure-eight at
+    the first step of an episode, as :func:`kite_env.flight.fly` does with the start parameter. The action is
+    ``dl* / control.delta_l_max_m`` clipped to [-1, 1]. One controller state per environment of a vectorised batch.
+    """
+
+    REQUIRED = ("position", "heading", "rates")
+
+    def __init__(self, cfg, path: Lemniscate | None = None):
+        from kite_env.envs.figure_eight import V_SCALE_MPS, observation_layout
+
+        self.cfg = cfg
+        self.path = path if path is not None else Lemniscate(cfg.trajectory)
+        self.layout = observation_layout(cfg.env.observation)
+        missing = [t for t in self.REQUIRED if t not in self.layout]
+        if missing:
+            raise ValueError(f"the baseline needs the observation terms {', '.join(missing)} (env.observation is "
+                             f"{cfg.env.observation!r})")
+        self.v_scale = V_SCALE_MPS
+        self._ctrl: list[BaselinePolicy] = []
+        self._fresh: list[bool] = []
+
+    def _ensure(self, n: int) -> None:
+        while len(self._ctrl) < n:
+            self._ctrl.append(BaselinePolicy(self.cfg.control, self.path))
+            self._fresh.append(True)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        from kite_env.trajectory import sphere_basis
+
+        obs = np.asarray(observation, dtype=float)
+        single = obs.ndim == 1
+        obs = np.atleast_2d(obs)
+        n = obs.shape[0]
+        self._ensure(n)
+        if episode_start is not None:
+            for i, start in enumerate(np.broadcast_to(np.asarray(episode_start, dtype=bool), (n,))):
+                if start:
+                    self._fresh[i] = True
+        lay = self.layout
+        act = np.empty((n, 1), dtype=np.float32)
+        for i in range(n):
+            R = obs[i, lay["position"]]
+            R = R / np.linalg.norm(R)
+            sin_psi, cos_psi = obs[i, lay["heading"]]
+            speed = float(obs[i, lay["rates"]][3]) * self.v_scale
+            if self._fresh[i]:
+                s0 = None
+                if "path" in lay:
+                    ph = obs[i, lay["path"]]
+                    s0 = float(math.atan2(ph[3], ph[4])) % (2.0 * math.pi)
+                self._ctrl[i].reset(s0)
+                self._fresh[i] = False
+            x_s, y_s = sphere_basis(R)
+            nose = cos_psi * x_s + sin_psi * y_s
+            dl, _ = self._ctrl[i](R, nose, speed * nose)
+            act[i, 0] = np.clip(dl / self.cfg.control.delta_l_max_m, -1.0, 1.0)
+        return (act[0] if single else act), None

@@ -1,0 +1,161 @@
+"""KiteFigureEight-v0: API conformance, reproducibility, robustness and the baseline through the env."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import kite_env  # noqa: F401  (registers the environments)
+from agents.baseline import BaselineAgent
+from kite_env.config import ConfigError
+from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+VALID_REASONS = {"ground", "slack tether", "wing did not converge", "non-finite state", "time limit"}
+
+
+def _rollout(env, actions, seed):
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for a in actions:
+        obs, r, term, trunc, info = env.step(a)
+        out.append(np.append(obs, r))
+        if term or trunc:
+            break
+    return np.concatenate(out)
+
+
+def test_registered_and_checkers_pass():
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make("KiteFigureEight-v0", render_mode="rgb_array")
+    assert isinstance(env.unwrapped, KiteFigureEightEnv)
+    check_env(env.unwrapped, skip_render_check=False)
+    sb3_check_env(env.unwrapped, warn=True)
+    assert env.observation_space.shape == (22,) and np.all(np.isfinite(env.observation_space.low))
+    assert env.action_space.shape == (1,)
+
+
+def test_same_seed_same_rollout_and_pickle():
+    acts = np.random.default_rng(0).uniform(-1, 1, (15, 1)).astype(np.float32)
+    over = ["env.wind_speed_min_mps=4", "env.wind_speed_max_mps=9", "env.turbulence_intensity_max=0.1",
+            "env.random_start=true", "env.initial_speed_min_mps=18"]
+    a = _rollout(KiteFigureEightEnv(overrides=over), acts, seed=7)
+    b = _rollout(KiteFigureEightEnv(overrides=over), acts, seed=7)
+    c = _rollout(KiteFigureEightEnv(overrides=over), acts, seed=8)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape != c.shape or not np.array_equal(a, c)
+    # a pickled env continues exactly like the original
+    env = KiteFigureEightEnv()
+    env.reset(seed=1)
+    for _ in range(3):
+        env.step(np.array([0.3], np.float32))
+    twin = pickle.loads(pickle.dumps(env))
+    for _ in range(3):
+        o1, r1, *_ = env.step(np.array([-0.5], np.float32))
+        o2, r2, *_ = twin.step(np.array([-0.5], np.float32))
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+
+
+def test_reward_terms_sum_and_info():
+    env = KiteFigureEightEnv(overrides=["env.w_action_rate=1.0"])
+    env.reset(seed=0)
+    for a in (0.5, -0.5, 0.0):
+        obs, r, term, trunc, info = env.step(np.array([a], np.float32))
+        parts = [info[k] for k in ("reward_tracking", "reward_traction", "reward_action", "reward_crash")]
+        assert r == pytest.approx(sum(parts), rel=0, abs=1e-12)
+        assert info["reward_action"] < 0.0  # the action changed
+        assert 0.0 < info["reward_tracking"] <= 1.0 and info["reward_traction"] > 0.0
+    assert info["t"] == pytest.approx(3 * env.control_dt)
+
+
+def test_random_actions_never_raise_and_end_with_a_reason():
+    """Random steering with randomised wind, turbulence and start: every observation finite and inside the space,
+    every episode ends (or is cut here) without an exception, with a valid reason when it ends."""
+    env = KiteFigureEightEnv(overrides=["env.wind_speed_min_mps=4", "env.wind_speed_max_mps=10",
+                                        "env.turbulence_intensity_max=0.15", "env.random_start=true",
+                                        "env.max_episode_s=2.0"])
+    env.action_space.seed(3)
+    ends = []
+    for ep in range(3):
+        obs, _ = env.reset(seed=100 + ep)
+        assert env.observation_space.contains(obs)
+        for _ in range(200):
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
+            assert np.all(np.isfinite(obs)) and env.observation_space.contains(obs) and math.isfinite(r)
+            if term or trunc:
+                assert info["termination_reason"] in VALID_REASONS
+                assert trunc == (info["termination_reason"] == "time limit")
+                ends.append(info["termination_reason"])
+                break
+    assert len(ends) == 3
+
+
+def test_render_rgb_array():
+    env = KiteFigureEightEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.array([0.0], np.float32))
+    img = env.render()
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 and img.std() > 0
+
+
+def test_make_vec_sync():
+    envs = gym.make_vec("KiteFigureEight-v0", num_envs=2, vectorization_mode="sync")
+    obs, _ = envs.reset(seed=[0, 1])
+    assert obs.shape == (2, 22)
+    obs, r, term, trunc, info = envs.step(np.zeros((2, 1), np.float32))
+    assert r.shape == (2,) and np.all(np.isfinite(obs))
+    envs.close()
+
+
+def test_bad_env_config_is_one_clear_error():
+    with pytest.raises(ConfigError, match="env.observation"):
+        KiteFigureEightEnv(overrides=["env.observation=position,bogus"])
+    with pytest.raises(ConfigError, match="env.wind_speed_min_mps"):
+        KiteFigureEightEnv(overrides=["env.wind_speed_min_mps=9", "env.wind_speed_max_mps=4"])
+    with pytest.raises(ConfigError, match="unknown config key 'env.nope'"):
+        KiteFigureEightEnv(overrides=["env.nope=1"])
+
+
+def test_observation_terms_are_configurable():
+    env = KiteFigureEightEnv(overrides=["env.observation=position,heading,line_forces"])
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (10,)
+    np.testing.assert_allclose(np.linalg.norm(obs[:3]), 1.0, atol=1e-6)
+    np.testing.assert_allclose(obs[3] ** 2 + obs[4] ** 2, 1.0, atol=1e-6)
+    with pytest.raises(ValueError, match="rates"):
+        BaselineAgent(env.cfg)
+
+
+@pytest.mark.slow
+def test_baseline_through_the_env_beats_random_and_straight():
+    """One evaluation path: the paper's controller via predict() against random steering and dl* = 0, over the
+    first 4 s at the paper's conditions (return and tracking). The full model's baseline leaves the figure in its
+    first turn (issue 3, README "Flight dynamics"), so this compares the policies before that. Tracking is not
+    compared: over the first 4 s flying straight along the initial tangent stays as close to the path as the
+    baseline, which turns too slowly in this model."""
+    def run(policy, seed=0, horizon_s=4.0):
+        env = KiteFigureEightEnv(overrides=[f"env.max_episode_s={horizon_s}"])
+        obs, _ = env.reset(seed=seed)
+        start, ret, dist = True, 0.0, []
+        while True:
+            a, _ = policy(obs, start)
+            start = False
+            obs, r, term, trunc, info = env.step(a)
+            ret += r
+            dist.append(info["path_distance_deg"])
+            if term or trunc:
+                return ret, float(np.sqrt(np.mean(np.square(dist)))), info["termination_reason"]
+
+    agent = BaselineAgent(KiteFigureEightEnv().cfg)
+    rng = np.random.default_rng(5)
+    base = run(lambda o, s: agent.predict(o, episode_start=s))
+    rand = run(lambda o, s: (rng.uniform(-1, 1, 1).astype(np.float32), None))
+    zero = run(lambda o, s: (np.zeros(1, np.float32), None))
+    assert base[2] == "time limit"
+    assert base[0] > rand[0] and base[0] > zero[0]
