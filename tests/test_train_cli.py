@@ -77,3 +77,18 @@ def test_bad_input_is_one_clear_error(tmp_path, capsys):
     assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(tmp_path / "c"), "--resume"]) == 2
     assert "no checkpoint" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()
+
+
+def test_kite_bench_writes_bench_json(tmp_path, capsys):
+    import json
+
+    from kite_env.cli import bench
+
+    assert bench.main(["--out", str(tmp_path), "--steps", "10"]) == 0
+    data = json.loads((tmp_path / "bench.json").read_text())
+    fe = data["fe"]
+    assert fe["env_steps_per_s"] > 0 and fe["real_time_factor"] > 0 and fe["steps"] == 10
+    assert abs(fe["real_time_factor"] * fe["env_steps_per_s"] * fe["control_dt_s"] - 1.0) < 1e-9
+    assert "env steps/s" in capsys.readouterr().out
+    assert bench.main(["--out", str(tmp_path / "x"), "--set", "env.nope=1"]) == 2
+    assert not (tmp_path / "x").exists()
