@@ -7,6 +7,7 @@ modules imports gymnasium; this module is the only bridge.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 
@@ -18,7 +19,7 @@ from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_
 from kite_env.control import LineActuator
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.flight import GROUND_ELEVATION_RAD
-from kite_env.trajectory import Lemniscate, heading_angle, sphere_basis, wrap_angle
+from kite_env.trajectory import Lemniscate, azimuth, elevation, heading_angle, sphere_basis, wrap_angle
 from kite_env.wind import WindField
 
 #: observation terms: (size, lower bound, upper bound) of each entry
@@ -138,7 +139,7 @@ class KiteFigureEightEnv(gym.Env):
         self.n_physics = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
         self.control_dt = self.n_physics * cfg.dynamics.dt_s
         self.max_steps = int(math.ceil(cfg.env.max_episode_s / self.control_dt - 1e-9))
-        ctrl = cfg.control if cfg.env.force_controller else _without_force_loop(cfg)
+        ctrl = cfg.control if cfg.env.force_controller else dataclasses.replace(cfg.control, k3_m=0.0)
         self._ctrl_cfg = ctrl
         self.sim: FlightSimulator | None = None  # built on the first reset (the wing mesh is reused afterwards)
         self.rec: StepRecord | None = None
@@ -157,7 +158,7 @@ class KiteFigureEightEnv(gym.Env):
             wind_seed = int(rng.integers(0, 2**31 - 1))
             s0 = float(rng.uniform(0.0, 2.0 * math.pi)) if env.random_start else 0.0
             v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
-            wind_cfg = _replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)
+            wind_cfg = dataclasses.replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)
             wind = WindField(wind_cfg)
             if self.sim is None:
                 self.sim = FlightSimulator(self.cfg, wind)
@@ -279,8 +280,7 @@ class KiteFigureEightEnv(gym.Env):
                  "path_distance_deg": math.degrees(near.distance_rad), "path_s": float(near.s),
                  "tether_force_N": tether, "speed_mps": speed, "heading_rad": psi,
                  "yaw_rate_rad_s": yaw_rate, "force_ratio_mu": mu, "delta_l_m": dl,
-                 "elevation_deg": math.degrees(math.asin(max(-1.0, min(1.0, float(R[2]))))),
-                 "azimuth_deg": math.degrees(math.atan2(float(R[1]), float(R[0])))}
+                 "elevation_deg": math.degrees(float(elevation(R))), "azimuth_deg": math.degrees(float(azimuth(R)))}
         return obs, feats
 
     # ------------------------------------------------------------------ rendering
@@ -341,14 +341,3 @@ class KiteFigureEightEnv(gym.Env):
             plt.close(self._fig)
             self._fig = None
 
-
-def _replace(obj, **kw):
-    import dataclasses
-
-    return dataclasses.replace(obj, **kw)
-
-
-def _without_force_loop(cfg: Config):
-    import dataclasses
-
-    return dataclasses.replace(cfg.control, k3_m=0.0)
