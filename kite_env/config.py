@@ -146,6 +146,9 @@ class EnvConfig:
     initial_speed_min_mps: float = 22.0  # initial speed along the path drawn from [min, max] [m/s]
     initial_speed_max_mps: float = 22.0  # [m/s]
     reset_attempts: int = 5  # draws of the start before reset() gives up (the wing must converge at the start) [-]
+    # false: no draws at all, the wind section as configured (turbulence realisation wind.seed unless reset() gets
+    # options={"wind_seed": n}) and the start at the crossing at sim.initial_speed_mps (kite-eval's conditions)
+    randomize: bool = True
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,11 @@
 """Fly a policy in the full model and log everything: the engine behind ``kite-eval`` (Bosch et al., Sect. IV).
 
-:func:`fly` sets up the wind (:mod:`kite_env.wind`), the figure-eight (:mod:`kite_env.trajectory`), the flight
-model (:class:`kite_env.dynamics.simulator.FlightSimulator`) and the line actuator (:class:`kite_env.control.
-LineActuator`), starts the kite at the crossing point of the figure-eight flying along it, and runs the policy at
-``control.control_dt_s``. A policy maps an observation (dict, below) to the desired steering-line length
-difference ``dl* = l_B - l_D`` [m]; the actuator turns it into rest lengths (Eq. 16-19).
-
-Observation dict (frame W): ``t`` [s], ``r_kcu`` (3,) [m], ``nose`` (3,) unit vector ``-x_k``, ``v_kite`` (3,)
-[m/s], ``omega`` (3,) [rad/s], ``line_tension`` (4,) [N], ``line_length`` (4,) [m], ``mu``.
+Every evaluation goes through the Gymnasium environment :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`
+(wind, figure-eight, flight model, line actuator of Eq. 16-19) and a policy with Stable-Baselines3's ``predict``
+interface (the paper's controller :class:`agents.baseline.BaselineAgent`, a trained model, random or constant
+actions). :func:`run_episode` flies one episode; :class:`FlightRecorder`, attached to the environment, logs every
+physics step; :func:`fly` is the short form for one episode at the configured conditions (wind section as it is,
+start at the crossing of the figure-eight, :func:`evaluation_config`).
 
 The log (:class:`FlightLog`) holds one row per time step in ``series`` (arrays, SI units, angles in rad):
 
@@ -52,6 +50,7 @@ half of the figure (for the Fig. 11 view). Deterministic: same config, same resu
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -60,10 +59,8 @@ from typing import Callable
 import numpy as np
 
 from kite_env.config import Config
-from kite_env.control import LineActuator
-from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
+from kite_env.dynamics.simulator import FlightSimulator, StepRecord
 from kite_env.trajectory import Lemniscate, azimuth, course_angle, elevation, heading_angle
-from kite_env.wind import WindField
 
 #: the flight ends as crashed when the KCU comes closer to the ground than this elevation [rad]
 GROUND_ELEVATION_RAD = math.radians(3.0)
@@ -76,72 +73,39 @@ class FlightLog:
     snapshots: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def observation(rec: StepRecord, mu: float) -> dict:
-    """The policy's view of a step record (module docstring)."""
-    return {"t": rec.t, "r_kcu": rec.state.r[4].copy(), "nose": -rec.R_wk[:, 0].copy(), "v_kite": rec.v_kite.copy(),
-            "omega": rec.omega.copy(), "line_tension": rec.line_tension.copy(),
-            "line_length": rec.line_length.copy(), "mu": mu}
-
-
-class BaselineAdapter:
-    """:class:`agents.baseline.BaselinePolicy` as an observation -> dl* policy."""
+class FlightRecorder:
+    """Logs every physics step of an episode of :class:`kite_env.envs.figure_eight.KiteFigureEightEnv` into a
+    :class:`FlightLog` (rows of the module docstring's table). The environment calls :meth:`start` after a reset
+    and :meth:`record` after every physics step; :meth:`log` closes the episode."""
 
     def __init__(self, cfg: Config, path: Lemniscate):
-        from agents.baseline import BaselinePolicy
+        self.cfg = cfg
+        self.path = path
 
-        self.policy = BaselinePolicy(cfg.control, path)
+    def start(self, sim: FlightSimulator, rec: StepRecord, s0: float, L_B: float, L_D: float, mu: float) -> None:
+        self.t_wall0 = time.perf_counter()
+        self.sim = sim
+        mesh = sim.wing.mesh
+        self.design = mesh.nodes
+        self.tips = (mesh.sections[0], mesh.sections[-1])
+        self.rows: dict[str, list] = {}
+        self.snapshots = {"initial": rec.wing.nodes.copy(), "design": self.design.copy()}
+        self.best_turn = -1.0
+        self.s_hint = self.s_prev = s0
+        self.s_unwrapped = s0
+        self.record(rec, L_B, L_D, {"delta_l_star": 0.0, "mu": mu}, 0.0)
 
-    def reset(self, s0: float = 0.0) -> None:
-        self.policy.reset(s0)
-
-    def act(self, obs: dict) -> float:
-        dl, self.last_info = self.policy(obs["r_kcu"], obs["nose"], obs["v_kite"])
-        return dl
-
-
-def fly(cfg: Config, policy=None, duration_s: float | None = None, progress: Callable[[float], None] | None = None,
-        wing=None) -> FlightLog:
-    """Fly ``policy`` (None: the paper's baseline controller) for ``duration_s`` (None: ``sim.duration_s``).
-
-    ``progress(t)`` is called after every control period. Returns the log; a wing that stops converging or a kite
-    that reaches the ground ends the flight early with ``meta['crashed']`` and ``meta['termination_reason']``.
-    """
-    duration = cfg.sim.duration_s if duration_s is None else float(duration_s)
-    if not duration > 0:
-        raise ValueError(f"duration must be positive, got {duration}")
-    t_wall0 = time.perf_counter()
-    path = Lemniscate(cfg.trajectory)
-    wind = WindField(cfg.wind)
-    sim = FlightSimulator(cfg, wind, wing)
-    policy = BaselineAdapter(cfg, path) if policy is None else policy
-    rec = sim.reset(path.point(0.0), path.tangent(0.0), cfg.sim.initial_speed_mps)
-    policy.reset(0.0)
-    act = LineActuator(cfg.control, sim.L_B0, sim.L_D0)
-    mesh = sim.wing.mesh
-    design = mesh.nodes
-    tip_r, tip_l = mesh.sections[0], mesh.sections[-1]
-    n_ctrl = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
-    n_steps = int(math.ceil(duration / cfg.dynamics.dt_s - 1e-9))
-    rows: dict[str, list] = {}
-    snapshots = {"initial": rec.wing.nodes.copy(), "design": design.copy()}
-    best_turn = -1.0
-    s_hint, s_unwrapped, s_prev = 0.0, 0.0, 0.0
-    dls = 0.0
-    L_B, L_D = sim.L_B0, sim.L_D0
-    ainfo = {"delta_l": 0.0, "delta_l_star": 0.0, "mu": act.force_ratio(rec.line_tension)}
-    crashed, reason = False, "completed"
-    t_step = 0.0
-    for k in range(n_steps + 1):
-        # ---- log the current state (step k)
-        r = rec.state.r
-        R = rec.R_wk
-        near = path.nearest(r[4], s_hint)
-        ds = (near.s - s_prev + math.pi) % (2 * math.pi) - math.pi
-        s_unwrapped += ds
-        s_prev = s_hint = near.s
-        x = rec.wing.nodes
-        disp_r = (x[tip_r] - design[tip_r]).mean(axis=0)
-        disp_l = (x[tip_l] - design[tip_l]).mean(axis=0)
+    def record(self, rec: StepRecord, L_B: float, L_D: float, ainfo: dict, t_step: float) -> None:
+        """One row for the state ``rec``, reached with the rest lengths ``L_B``, ``L_D`` of the control decision
+        ``ainfo`` (:meth:`kite_env.control.LineActuator.rest_lengths`); ``t_step`` its wall time [s]."""
+        cfg = self.cfg
+        r, R = rec.state.r, rec.R_wk
+        near = self.path.nearest(r[4], self.s_hint)
+        self.s_unwrapped += (near.s - self.s_prev + math.pi) % (2 * math.pi) - math.pi
+        self.s_prev = self.s_hint = near.s
+        x, design = rec.wing.nodes, self.design
+        disp_r = (x[self.tips[0]] - design[self.tips[0]]).mean(axis=0)
+        disp_l = (x[self.tips[1]] - design[self.tips[1]]).mean(axis=0)
         row = {
             "t": rec.t, "r": r, "v": rec.state.v, "R_wk": R, "v_kite": rec.v_kite, "omega": rec.omega,
             "omega_k": R.T @ rec.omega, "v_wind": rec.v_wind, "speed": float(np.linalg.norm(rec.v_kite)),
@@ -155,46 +119,90 @@ def fly(cfg: Config, policy=None, duration_s: float | None = None, progress: Cal
             "tip_disp_right": -float(disp_r[1]), "tip_disp_left": float(disp_l[1]),
             "elevation": float(elevation(r[4])), "azimuth": float(azimuth(r[4])),
             "psi": float(heading_angle(r[4], -R[:, 0])), "course": float(course_angle(r[4], rec.v_kite)),
-            "path_s": s_unwrapped, "path_distance": near.distance_rad, "newton_iters": rec.wing.newton_iters,
+            "path_s": self.s_unwrapped, "path_distance": near.distance_rad, "newton_iters": rec.wing.newton_iters,
             "wall_time": t_step, "constraint_drift": rec.constraint_drift,
         }
         for key, val in row.items():
-            rows.setdefault(key, []).append(np.array(val, dtype=float, copy=True))
+            self.rows.setdefault(key, []).append(np.array(val, dtype=float, copy=True))
         upper = row["elevation"] > math.radians(cfg.trajectory.elevation_deg)
-        if upper and rec.t > cfg.sim.warmup_s and abs(row["steering_input"]) > best_turn:
-            best_turn = abs(row["steering_input"])
-            snapshots["turn"] = x.copy()
-            snapshots["turn_t"] = np.array(rec.t)
-        if k == n_steps:
-            break
-        if r[4, 2] < math.sin(GROUND_ELEVATION_RAD) * cfg.dynamics.tether_length_m:
-            crashed, reason = True, "ground"
-            break
-        # ---- control
-        if k % n_ctrl == 0:
-            mu = act.force_ratio(rec.line_tension)
-            dls = float(policy.act(observation(rec, mu)))
-            if not math.isfinite(dls):
-                crashed, reason = True, "policy returned a non-finite action"
-                break
-            L_B, L_D, ainfo = act.rest_lengths(dls, rec.line_length, rec.line_tension)
-            if progress is not None:
-                progress(rec.t)
-        # ---- step
-        t0 = time.perf_counter()
-        try:
-            rec = sim.step(L_B, L_D)
-        except SimulationError as exc:
-            crashed, reason = True, exc.reason
-            break
-        t_step = time.perf_counter() - t0
-    series = {k: np.stack(v) for k, v in rows.items()}
-    meta = {
-        "crashed": crashed, "termination_reason": reason, "sim_time_s": float(series["t"][-1]),
-        "wall_time_s": time.perf_counter() - t_wall0, "dt_s": cfg.dynamics.dt_s,
-        "control_dt_s": n_ctrl * cfg.dynamics.dt_s, "L_B0": sim.L_B0, "L_D0": sim.L_D0,
-        "pair_stiffness_N_per_m": sim.pair_stiffness.tolist(), "n_sections": int(len(mesh.sections)),
-        "design_tip_distance_m": float(np.linalg.norm(design[mesh.bridle[0]] - design[mesh.bridle[2]])),
-        "warmup_s": cfg.sim.warmup_s,
-    }
-    return FlightLog(series=series, meta=meta, snapshots=snapshots)
+        if upper and rec.t > cfg.sim.warmup_s and abs(row["steering_input"]) > self.best_turn:
+            self.best_turn = abs(row["steering_input"])
+            self.snapshots["turn"] = x.copy()
+            self.snapshots["turn_t"] = np.array(rec.t)
+
+    def log(self, termination_reason: str | None, control_dt_s: float) -> FlightLog:
+        """The episode's log; ``termination_reason`` None or "time limit" means completed."""
+        crashed = termination_reason not in (None, "time limit")
+        series = {k: np.stack(v) for k, v in self.rows.items()}
+        sim, mesh, design = self.sim, self.sim.wing.mesh, self.design
+        meta = {
+            "crashed": crashed, "termination_reason": termination_reason if crashed else "completed",
+            "sim_time_s": float(series["t"][-1]), "wall_time_s": time.perf_counter() - self.t_wall0,
+            "dt_s": self.cfg.dynamics.dt_s, "control_dt_s": control_dt_s, "L_B0": sim.L_B0, "L_D0": sim.L_D0,
+            "pair_stiffness_N_per_m": sim.pair_stiffness.tolist(), "n_sections": int(len(mesh.sections)),
+            "design_tip_distance_m": float(np.linalg.norm(design[mesh.bridle[0]] - design[mesh.bridle[2]])),
+            "warmup_s": self.cfg.sim.warmup_s,
+        }
+        return FlightLog(series=series, meta=meta, snapshots=dict(self.snapshots))
+
+
+def evaluation_config(cfg: Config, duration_s: float | None = None, randomize: bool = False) -> Config:
+    """``cfg`` with the environment set up for an evaluation at the configured conditions: the wind section as it
+    is (no randomisation), the start at the crossing at ``sim.initial_speed_mps``, episodes of ``duration_s``
+    (default ``sim.duration_s``). ``randomize``: draw wind and start from the ``env`` ranges instead."""
+    duration = cfg.sim.duration_s if duration_s is None else float(duration_s)
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be positive, got {duration}")
+    env = dataclasses.replace(cfg.env, randomize=randomize, max_episode_s=duration)
+    return dataclasses.replace(cfg, env=env, sim=dataclasses.replace(cfg.sim, duration_s=duration))
+
+
+def run_episode(env, agent, seed: int | None = None, options: dict | None = None,
+                progress: Callable[[float], None] | None = None, record: bool = True):
+    """Fly one episode of ``env`` (a :class:`~kite_env.envs.figure_eight.KiteFigureEightEnv`, unwrapped) with
+    ``agent`` (SB3 ``predict`` interface). Returns ``(log, info)``: the :class:`FlightLog` (None without
+    ``record``) and a dict with ``episode_return``, ``episode_steps``, ``termination_reason`` and the reward terms
+    summed over the episode, and the episode's draws (``env.episode_info``). ``progress(t)`` is called after every control step."""
+    env.recorder = FlightRecorder(env.cfg, env.path) if record else None
+    obs, _ = env.reset(seed=seed, options=options)
+    terms: dict[str, float] = {}
+    ret, steps, done, info = 0.0, 0, False, {}
+    start = True
+    while not done:
+        action, _ = agent.predict(obs, episode_start=np.array([start]), deterministic=True)
+        start = False
+        obs, reward, terminated, truncated, info = env.step(action)
+        ret += float(reward)
+        steps += 1
+        for k, v in info.items():
+            if k.startswith("reward_"):
+                terms[k] = terms.get(k, 0.0) + float(v)
+        done = terminated or truncated
+        if progress is not None:
+            progress(info["t"])
+    reason = info.get("termination_reason")
+    log = env.recorder.log(reason, env.control_dt) if record else None
+    env.recorder = None
+    return log, {**env.episode_info, "episode_return": ret, "episode_steps": steps, "termination_reason": reason,
+                 **terms}
+
+
+def fly(cfg: Config, policy=None, duration_s: float | None = None, progress: Callable[[float], None] | None = None,
+        wing=None) -> FlightLog:
+    """Fly ``policy`` (an agent with SB3's ``predict``; None: the paper's controller,
+    :class:`agents.baseline.BaselineAgent`) for ``duration_s`` (None: ``sim.duration_s``) at the configured wind,
+    from the crossing of the figure-eight, through the Gymnasium environment (one evaluation path for every
+    policy). ``progress(t)`` is called after every control period. Returns the log; a wing that stops converging,
+    a slack tether or a kite that reaches the ground ends the flight early with ``meta['crashed']`` and
+    ``meta['termination_reason']``. ``wing``: an :class:`~kite_env.fsi.AeroelasticWing` to reuse.
+    """
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    env = KiteFigureEightEnv(config=evaluation_config(cfg, duration_s), wing=wing)
+    if policy is None:
+        from agents.baseline import BaselineAgent
+
+        policy = BaselineAgent(env.cfg, env.path)
+    log, _ = run_episode(env, policy, progress=progress)
+    env.close()
+    return log

@@ -30,14 +30,14 @@ def _setup(overrides):
     from kite_env.config import load_config
     from kite_env.control import LineActuator
     from kite_env.dynamics.simulator import FlightSimulator
-    from kite_env.flight import BaselineAdapter
+    from agents.baseline import BaselinePolicy
     from kite_env.trajectory import Lemniscate
     from kite_env.wind import WindField
 
     cfg = load_config(None, overrides)
     path = Lemniscate(cfg.trajectory)
     sim = FlightSimulator(cfg, WindField(cfg.wind))
-    pol = BaselineAdapter(cfg, path)
+    pol = BaselinePolicy(cfg.control, path)
     rec = sim.reset(path.point(0.0), path.tangent(0.0), cfg.sim.initial_speed_mps)
     pol.reset(0.0)
     return cfg, sim, pol, rec, LineActuator(cfg.control, sim.L_B0, sim.L_D0)
@@ -45,16 +45,14 @@ def _setup(overrides):
 
 def _fly_to(t_end, overrides):
     """Baseline closed loop up to t_end; returns cfg, simulator and the held rest lengths."""
-    from kite_env.flight import observation
-
     cfg, sim, pol, rec, act = _setup(overrides)
     n_ctrl = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
     k = 0
     L_B = L_D = sim.L_B0
     while rec.t < t_end - 1e-9:
         if k % n_ctrl == 0:
-            mu = act.force_ratio(rec.line_tension)
-            L_B, L_D, _ = act.rest_lengths(float(pol.act(observation(rec, mu))), rec.line_length, rec.line_tension)
+            dl_star, _ = pol(rec.state.r[4], -rec.R_wk[:, 0], rec.v_kite)  # full-precision state, no env in between
+            L_B, L_D, _ = act.rest_lengths(dl_star, rec.line_length, rec.line_tension)
         rec = sim.step(L_B, L_D)
         k += 1
     print(f"at t = {rec.t:.3f} s: L_B - L_D = {L_B - L_D:.3f} m, right-tip alpha {math.degrees(rec.wing.alpha[0]):.2f} deg")

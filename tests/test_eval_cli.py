@@ -42,6 +42,12 @@ SHORT = ["--duration", "0.3", "--set", "sim.warmup_s=0.1", "--quiet"]
     (["--duration", "abc"], "--duration"),
     (["--seed", "1.5"], "--seed"),
     (["--policy", "nosuchpolicy"], "baseline"),
+    (["--policy", "constant:2"], "[-1, 1]"),
+    (["--policy", "constant:abc"], "constant"),
+    (["--policy", "missing/model.zip"], "missing/model.zip"),
+    (["--episodes", "0"], "--episodes"),
+    (["--compare", "baseline", "no_such_run_or_policy"], "no_such_run_or_policy"),
+    (["--policy", "random", "--compare", "baseline"], "--compare"),
 ])
 def test_bad_input_exit_2_one_line_no_output(tmp_path, capsys, monkeypatch, args, token):
     monkeypatch.chdir(tmp_path)  # a relative config path is looked up here
@@ -77,7 +83,7 @@ def test_interrupt_leaves_nothing(tmp_path, capsys, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(kite_env.flight, "fly", interrupted)
+    monkeypatch.setattr(kite_env.flight, "run_episode", interrupted)
     assert main(["--out", str(tmp_path / "run"), *SHORT]) == 130
     assert list(tmp_path.iterdir()) == []
     assert "interrupted" in capsys.readouterr().err
@@ -140,12 +146,12 @@ def test_crash_is_a_result_not_an_error(real_run, tmp_path, capsys, monkeypatch)
     log = read_timeseries(first / "timeseries.npz")
     log.meta.update(crashed=True, termination_reason="ground")
 
-    def crashed_flight(cfg, policy=None, duration_s=None, progress=None, wing=None):
+    def crashed_flight(env, agent, seed=None, options=None, progress=None, record=True):
         for t in log.series["t"][::4]:
             progress(float(t))
-        return log
+        return log, {"wind_seed": 0, "episode_return": -50.0, "episode_steps": 3, "termination_reason": "ground"}
 
-    monkeypatch.setattr(kite_env.flight, "fly", crashed_flight)
+    monkeypatch.setattr(kite_env.flight, "run_episode", crashed_flight)
     monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
     out = tmp_path / "crash"
     rc = main(["--out", str(out), "--duration", "0.3", "--set", "sim.warmup_s=0.1"])
@@ -155,3 +161,44 @@ def test_crash_is_a_result_not_an_error(real_run, tmp_path, capsys, monkeypatch)
     assert metrics["crashed"] is True and metrics["termination_reason"] == "ground"
     assert "kite-eval: warning:" in cap.err and "ground" in cap.err
     assert "tether force min/mean/max" in cap.out and "traction (tether) force range" in cap.out
+
+
+def test_damaged_model_file_is_one_clear_error(tmp_path, capsys):
+    bad = tmp_path / "model.zip"
+    bad.write_text("not a zip")
+    assert main(["--policy", str(bad), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a Stable-Baselines3 model zip" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
+
+
+def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
+    """Two episodes each of random and constant:0 (0.15 s), next to the earlier baseline run folder: one table in
+    Markdown and CSV, one run folder per evaluated policy with its episode rows."""
+    _, _, first = real_run
+    out = tmp_path / "cmp"
+    rc = main(["--compare", "random", "constant:0", str(first), "--episodes", "2", "--duration", "0.15",
+               "--set", "sim.warmup_s=0.05", "--seed", "3", "--out", str(out), "--quiet"])
+    assert rc == 0
+    assert {"compare.md", "compare.csv", "random", "constant_0", "command.txt"} <= {p.name for p in out.iterdir()}
+    for name in ("random", "constant_0"):
+        m = json.loads((out / name / "metrics.json").read_text())
+        assert m["episodes"] == 2 and len(m["episode_rows"]) == 2
+        assert [r["seed"] for r in m["episode_rows"]] == [3, 4]
+        assert [r["wind_seed"] for r in m["episode_rows"]] == [3, 4]
+        assert m["episode_return"] == m["episode_rows"][0]["episode_return"]
+        rets = [r["episode_return"] for r in m["episode_rows"]]
+        assert m["episode_return_mean"] == pytest.approx(np.mean(rets))
+        for r in m["episode_rows"]:  # the reward terms add up to the return
+            terms = sum(v for k, v in r.items() if k.startswith("reward_"))
+            assert terms == pytest.approx(r["episode_return"])
+        lines = (out / name / "episodes.csv").read_text().strip().splitlines()
+        assert len(lines) == 3 and lines[0].startswith("episode,seed,")
+    const = json.loads((out / "constant_0" / "metrics.json").read_text())
+    # constant action, no turbulence: both episodes fly the same flight
+    assert const["episode_rows"][0]["episode_return"] == const["episode_rows"][1]["episode_return"]
+    md = (out / "compare.md").read_text().strip().splitlines()
+    assert md[0].startswith("| policy | episodes | return mean") and len(md) == 2 + 3
+    assert [ln.split("|")[1].strip() for ln in md[2:]] == ["random", "constant_0", first.name]
+    rows = (out / "compare.csv").read_text().strip().splitlines()
+    assert len(rows) == 4 and rows[0].startswith("policy,episodes,return mean")

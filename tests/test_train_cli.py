@@ -49,6 +49,15 @@ def test_short_training_run_gives_a_loadable_model(tmp_path, algo):
     a, _ = model.predict(obs, deterministic=True)
     obs, r, term, trunc, info = env.step(a)
     assert np.isfinite(r)
+    # kite-eval loads the model (algorithm from the zip, normalisation and config from its run folder) and flies it
+    from kite_env.cli import eval as eval_cli
+
+    ev = tmp_path / "eval"
+    assert eval_cli.main(["--policy", str(out / "model.zip"), "--duration", "0.1", "--set", "sim.warmup_s=0.05",
+                          "--out", str(ev), "--quiet"]) == 0
+    m = yaml.safe_load((ev / "metrics.json").read_text())
+    assert m["policy"] == str(out / "model.zip") and m["sim_time_s"] == pytest.approx(0.1)
+    assert m["episode_rows"][0]["episode_steps"] == 5 and np.isfinite(m["episode_return"])
 
 
 def test_resume_continues_from_the_last_checkpoint(tmp_path):

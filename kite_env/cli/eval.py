@@ -1,17 +1,34 @@
-"""``kite-eval``: fly a policy in the full aeroelastic model and write metrics, time series and figures.
+"""``kite-eval``: fly policies in the full aeroelastic model and write metrics, time series and figures.
 
-Example::
+Examples::
 
     kite-eval --policy baseline --duration 60 --out runs/baseline [--config FILE] [--set section.key=value ...]
-              [--seed N] [--force] [--quiet]
+              [--seed N] [--episodes N] [--randomize] [--force] [--quiet]
+    kite-eval --policy random | constant:0 | runs/ppo/model.zip --episodes 3 --out runs/random
+    kite-eval --compare baseline random constant:0 runs/ppo/model.zip --episodes 2 --out runs/compare
 
-writes into ``--out``:
+Every policy flies through the Gymnasium environment ``KiteFigureEight-v0`` (:func:`kite_env.flight.run_episode`):
+``baseline`` (the paper's controller), ``random``, ``constant:<a>`` (a normalised action in [-1, 1]) or the path
+of a model saved by ``kite-train`` (:mod:`agents.policies`). By default an episode flies the configured conditions
+(the ``wind`` section as it is, start at the crossing of the figure-eight, ``env.randomize = false``); episode ``i``
+uses the turbulence realisation ``seed + i`` (``--seed``, default ``wind.seed``) and ``reset(seed=seed + i)``.
+``--randomize`` draws wind and start as in training instead (the ``env`` section's ranges).
 
-- ``metrics.json``: :func:`kite_env.metrics.compute_metrics` plus ``policy`` and ``wind_seed``,
-- ``config.yaml``: the resolved configuration (defaults, file, ``--set``, ``--seed`` and ``--duration`` applied),
-- ``timeseries.npz`` / ``timeseries.csv``: :func:`kite_env.metrics.write_timeseries`,
-- the figures of :func:`kite_env.plots.make_plots` (``path.png``, ``alpha.png``, ... like the paper's Sect. IV),
+A run writes into ``--out``:
+
+- ``metrics.json``: :func:`kite_env.metrics.compute_metrics` of the first episode, plus ``policy``, ``wind_seed``,
+  ``episode_return`` (first episode), ``episodes`` (count), ``episode_return_mean`` / ``_std`` and
+  ``episode_rows`` (one row per episode: return, reward terms, length, end, main metrics),
+- ``episodes.csv``: the episode rows,
+- ``config.yaml``: the resolved configuration (defaults, file, ``--set``, ``--seed``, ``--duration`` applied),
+- ``timeseries.npz`` / ``timeseries.csv`` (first episode): :func:`kite_env.metrics.write_timeseries`,
+- the figures of :func:`kite_env.plots.make_plots` (first episode; ``path.png``, ``alpha.png``, ... like the
+  paper's Sect. IV),
 - ``command.txt``: the command line.
+
+``--compare A B ...`` evaluates each policy (or reads an existing ``kite-eval`` run folder) into ``OUT/<name>/`` and
+writes ``OUT/compare.md`` and ``OUT/compare.csv``: the policies side by side (return, crashes, tracking, traction,
+figure-eights, L/D, speed).
 
 Everything is written into a temporary sibling folder that is renamed to ``--out`` only when complete, so a failed
 or interrupted run (Ctrl-C) leaves nothing half-written. An existing non-empty ``--out`` is refused unless
@@ -19,8 +36,9 @@ or interrupted run (Ctrl-C) leaves nothing half-written. An existing non-empty `
 
 Exit status: 0 when the files were written, also when the kite crashed (a crash is a result, not an error:
 ``metrics.json`` has ``crashed: true`` and the ``termination_reason``, and a warning goes to stderr); 2 for bad
-input (unknown policy or config key, wrong type, invalid value, missing config file, non-positive duration,
-unusable ``--out``), with one line ``kite-eval: error: ...`` on stderr and no output folder; 130 when interrupted.
+input (unknown policy, missing or damaged model file, unknown config key, wrong type, invalid value, missing config
+file, non-positive duration or episode count, unusable ``--out``), with one line ``kite-eval: error: ...`` on
+stderr and no output folder; 130 when interrupted.
 """
 
 from __future__ import annotations
@@ -34,19 +52,18 @@ import shutil
 import sys
 import tempfile
 from pathlib import Path
-from typing import Callable
+
+import numpy as np
 
 PROG = "kite-eval"
 
 
-def _baseline(cfg):
-    """The paper's steering and force controller (Sect. III): ``fly`` builds it when given ``policy=None``."""
-    return None
-
-
-#: policy name -> factory(cfg) returning an object with ``reset(s0)`` and ``act(obs) -> dl*`` [m] (see
-#: :mod:`kite_env.flight`), or None for the built-in baseline. Register new policies here.
-POLICIES: dict[str, Callable] = {"baseline": _baseline}
+#: policies by name; a model file path and ``constant:<value>`` are accepted too (:mod:`agents.policies`)
+POLICIES = ("baseline", "random", "constant:<value>", "<path to model.zip>")
+#: per-episode columns of ``episodes.csv`` / ``episode_rows`` taken from the episode's metrics
+EPISODE_METRICS = ("sim_time_s", "crashed", "termination_reason", "figure_eights_completed", "tracking_error_rms_deg",
+                   "tether_force_mean_N", "tether_force_max_N", "kite_speed_min_mps", "kite_speed_max_mps",
+                   "lift_to_drag_mean", "alpha_mid_mean_deg", "real_time_factor")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -62,14 +79,23 @@ def build_parser() -> argparse.ArgumentParser:
                 "series and the paper's Sect. IV figures into --out.",
                 epilog="exit status: 0 results written (also when the kite crashed: see metrics.json), "
                 "2 bad input (nothing written), 130 interrupted (nothing written)")
-    p.add_argument("--policy", default="baseline", help=f"policy to fly (one of: {', '.join(POLICIES)})")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--policy", default="baseline",
+                      help="policy to fly: baseline, random, constant:<a> (a in [-1, 1]) or a model.zip path")
+    what.add_argument("--compare", nargs="+", metavar="POLICY_OR_RUN",
+                      help="policies (or existing kite-eval run folders) to evaluate and tabulate side by side")
+    p.add_argument("--episodes", type=int, default=1, help="episodes per policy (default 1)")
     p.add_argument("--duration", type=float, default=None,
-                   help="simulated time [s] (default: sim.duration_s of the config)")
+                   help="simulated time per episode [s] (default: sim.duration_s of the config)")
     p.add_argument("--out", required=True, help="output folder (must not exist or be empty, unless --force)")
-    p.add_argument("--config", default=None, help="YAML config file (default: built-in defaults)")
+    p.add_argument("--config", default=None, help="YAML config file (default: built-in defaults; for a model: "
+                   "the config.yml of its kite-train run folder if there is one)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a config value (repeatable)")
-    p.add_argument("--seed", type=int, default=None, help="turbulence realisation (sets wind.seed)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the first episode: turbulence realisation (wind.seed) and reset seed")
+    p.add_argument("--randomize", action="store_true",
+                   help="draw wind and start per episode from the env section's ranges (as in training)")
     p.add_argument("--force", action="store_true", help="replace an existing non-empty --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     return p
@@ -148,95 +174,279 @@ def _publish(tmp: Path, out: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+class _Job:
+    """One policy to evaluate (or an existing run folder to read): its name, spec, config, env and agent."""
+
+    def __init__(self, spec: str, label: str, cfg=None, env=None, agent=None, run_dir: Path | None = None):
+        self.spec, self.label, self.cfg, self.env, self.agent, self.run_dir = spec, label, cfg, env, agent, run_dir
+
+
+def _model_config(spec: str) -> str | None:
+    """The ``config.yml`` of the kite-train run folder that holds the model ``spec`` (model.zip, checkpoints/,
+    eval/), if there is one."""
+    p = Path(spec)
+    for folder in (p.parent, p.parent.parent):
+        if (folder / "config.yml").is_file():
+            return str(folder / "config.yml")
+    return None
+
+
+def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
+    """Config, environment and agent for ``spec``; raises ConfigError / PolicyError / ValueError on bad input."""
+    from agents.policies import make_agent
+    from kite_env.config import ConfigError, load_config
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.flight import evaluation_config
+    from kite_env.geometry import KITES
+
+    is_model = spec.endswith(".zip")
+    config_file = args.config if args.config is not None or not is_model else _model_config(spec)
+    if config_file is not None and not Path(config_file).is_file():
+        raise ConfigError(f"--config file {config_file!r} does not exist")
+    cfg = load_config(config_file, overrides)
+    if cfg.kite.name not in KITES:
+        raise ConfigError(f"config key 'kite.name': unknown kite {cfg.kite.name!r} (valid: {', '.join(sorted(KITES))})")
+    env = KiteFigureEightEnv(config=evaluation_config(cfg, randomize=args.randomize))
+    seed = cfg.wind.seed if args.seed is None else args.seed
+    return _Job(spec, label, env.cfg, env, make_agent(spec, env, seed=seed))
+
+
+def _evaluate(job: _Job, args, progress) -> tuple:
+    """Fly ``args.episodes`` episodes; returns (log of the first episode, its metrics, episode rows)."""
+    from kite_env.flight import run_episode
+    from kite_env.metrics import compute_metrics
+
+    cfg = job.cfg
+    seed = cfg.wind.seed if args.seed is None else args.seed
+    first_log, first_metrics, rows = None, None, []
+    for i in range(args.episodes):
+        options = None if args.randomize else {"wind_seed": seed + i}
+        log, info = run_episode(job.env, job.agent, seed=seed + i, options=options, progress=progress)
+        m = compute_metrics(log, cfg)
+        row = {"episode": i, "seed": seed + i, **info, **{k: m[k] for k in EPISODE_METRICS}}
+        rows.append(row)
+        if i == 0:
+            first_log, first_metrics = log, m
+    job.env.close()
+    return first_log, first_metrics, rows
+
+
+def _episode_stats(rows: list[dict]) -> dict:
+    ret = np.array([r["episode_return"] for r in rows], dtype=float)
+    return {"episodes": len(rows), "episode_return_mean": float(ret.mean()),
+            "episode_return_std": float(ret.std()) if len(rows) > 1 else 0.0}
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    import csv
+
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
+
+
+def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], argv: list[str]) -> dict:
+    import yaml
+
+    from kite_env.metrics import write_timeseries
+    from kite_env.plots import make_plots
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {"policy": job.spec, "wind_seed": rows[0]["wind_seed"], **metrics,
+           "episode_return": rows[0]["episode_return"], **_episode_stats(rows), "episode_rows": rows}
+    with open(folder / "metrics.json", "w") as fh:
+        json.dump(out, fh, indent=2, allow_nan=False, default=_json_value)
+    _write_csv(folder / "episodes.csv", rows)
+    with open(folder / "config.yaml", "w") as fh:
+        yaml.safe_dump(job.cfg.to_dict(), fh, sort_keys=False)
+    (folder / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
+    write_timeseries(log, folder)
+    make_plots(log, job.cfg, folder)
+    return out
+
+
+def _json_value(o):
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+#: columns of the comparison table: (header, function of the run's metrics.json)
+def _compare_columns():
+    def mean(key):
+        def f(m):
+            vals = [r.get(key) for r in m.get("episode_rows") or [m]]
+            vals = [float(v) for v in vals if v is not None]
+            return float(np.mean(vals)) if vals else None
+        return f
+
+    def crashed(m):
+        rows = m.get("episode_rows") or [m]
+        return f"{sum(bool(r['crashed']) for r in rows)}/{len(rows)}"
+
+    def ends(m):
+        rows = m.get("episode_rows") or [m]
+        reasons = sorted({r["termination_reason"] for r in rows})
+        return "; ".join(reasons)
+
+    return [
+        ("episodes", lambda m: m.get("episodes", 1)),
+        ("return mean", lambda m: m.get("episode_return_mean", m.get("episode_return"))),
+        ("return std", lambda m: m.get("episode_return_std", 0.0)),
+        ("crashed", crashed),
+        ("end", ends),
+        ("flight time mean [s]", mean("sim_time_s")),
+        ("figure-eights mean", mean("figure_eights_completed")),
+        ("tracking error RMS [deg]", mean("tracking_error_rms_deg")),
+        ("tether force mean [N]", mean("tether_force_mean_N")),
+        ("L/D mean", mean("lift_to_drag_mean")),
+        ("speed min [m/s]", mean("kite_speed_min_mps")),
+        ("speed max [m/s]", mean("kite_speed_max_mps")),
+    ]
+
+
+def compare_table(results: list[tuple[str, dict]]) -> tuple[str, list[dict]]:
+    """Markdown table and CSV rows of the runs ``(name, metrics.json dict)``, side by side."""
+    cols = _compare_columns()
+    rows = []
+    for name, m in results:
+        row = {"policy": name}
+        for header, f in cols:
+            row[header] = f(m)
+        rows.append(row)
+    heads = ["policy"] + [h for h, _ in cols]
+    lines = ["| " + " | ".join(heads) + " |", "|" + "|".join("---" if h in ("policy", "end", "crashed") else "---:"
+                                                          for h in heads) + "|"]
+    for row in rows:
+        lines.append("| " + " | ".join(_fmt(row[h], ".4g") for h in heads) + " |")
+    return "\n".join(lines) + "\n", rows
+
+
+def _labels(specs: list[str]) -> list[str]:
+    from agents.policies import policy_label
+
+    out: list[str] = []
+    for spec in specs:
+        p = Path(spec)
+        base = p.name if p.is_dir() else policy_label(spec)
+        label, k = base, 2
+        while label in out:
+            label, k = f"{base}_{k}", k + 1
+        out.append(label)
+    return out
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
         return int(exc.code or 0)
-    from kite_env.config import ConfigError, load_config
-    from kite_env.geometry import KITES
+    from agents.policies import PolicyError
+    from kite_env.config import ConfigError
 
-    if args.policy not in POLICIES:
-        return _fail(f"unknown policy {args.policy!r} (valid: {', '.join(POLICIES)})")
     overrides = list(args.overrides)
     if args.duration is not None:
         if not (math.isfinite(args.duration) and args.duration > 0):
             return _fail(f"--duration must be a positive number of seconds, got {args.duration:g}")
         overrides.append(f"sim.duration_s={args.duration!r}")
+    if args.episodes < 1:
+        return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.seed is not None:
         overrides.append(f"wind.seed={args.seed}")
     if args.config is not None and not Path(args.config).is_file():
         return _fail(f"--config file {args.config!r} does not exist")
+    specs = list(args.compare) if args.compare else [args.policy]
+    jobs: list[_Job] = []
     try:
-        cfg = load_config(args.config, overrides)
-    except ConfigError as exc:
+        for spec, label in zip(specs, _labels(specs)):
+            run = Path(spec)
+            if args.compare and run.is_dir():
+                if not (run / "metrics.json").is_file():
+                    return _fail(f"--compare: folder {spec!r} has no metrics.json (not a kite-eval run)")
+                jobs.append(_Job(spec, label, run_dir=run))
+            else:
+                jobs.append(_prepare(spec, args, overrides, label))
+    except (ConfigError, PolicyError) as exc:
         return _fail(str(exc))
-    if cfg.kite.name not in KITES:
-        return _fail(f"config key 'kite.name': unknown kite {cfg.kite.name!r} (valid: {', '.join(sorted(KITES))})")
+    except ValueError as exc:
+        return _fail(str(exc))
     out = Path(args.out)
     why = _check_out(out, args.force)
     if why:
         return _fail(why)
 
-    from kite_env.flight import fly
-
-    policy = POLICIES[args.policy](cfg)
-    duration = cfg.sim.duration_s
+    flying = [j for j in jobs if j.run_dir is None]
+    total = sum(j.cfg.env.max_episode_s for j in flying) * args.episodes
     bar = None
-    if not args.quiet:
+    done = [0.0]
+    if not args.quiet and flying:
         from tqdm import tqdm
 
-        print(f"{PROG}: policy {args.policy}, {duration:g} s simulated, wind {cfg.wind.speed_mps:g} m/s "
-              f"(seed {cfg.wind.seed}), output {out}", flush=True)
-        bar = tqdm(total=duration, unit="s", desc="flight", dynamic_ncols=True,
+        j0 = flying[0]
+        print(f"{PROG}: {', '.join(j.label for j in flying)}; {args.episodes} episode(s) of "
+              f"{j0.cfg.env.max_episode_s:g} s, wind {j0.cfg.wind.speed_mps:g} m/s, output {out}", flush=True)
+        bar = tqdm(total=total, unit="s", desc="flight", dynamic_ncols=True,
                    bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:g} s sim [{elapsed}<{remaining}]")
 
     def progress(t: float) -> None:
         if bar is not None:
-            bar.update(min(t, duration) - bar.n)
+            bar.update(max(0.0, min(total, done[0] + t) - bar.n))
 
+    out.resolve().parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.resolve().parent))
+    results: list[tuple[str, dict]] = []
     try:
-        log = fly(cfg, policy=policy, progress=progress)
-        progress(float(log.meta["sim_time_s"]))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the result folder gets the usual permissions
+        for job in jobs:
+            if job.run_dir is not None:
+                results.append((job.label, json.loads((job.run_dir / "metrics.json").read_text())))
+                continue
+            log, metrics, rows = _evaluate(job, args, progress)
+            done[0] += job.cfg.env.max_episode_s * args.episodes
+            progress(0.0)
+            folder = tmp / job.label if args.compare else tmp
+            results.append((job.label, _write_run(folder, job, log, metrics, rows, argv)))
+        if args.compare:
+            md, rows = compare_table(results)
+            (tmp / "compare.md").write_text(md)
+            _write_csv(tmp / "compare.csv", rows)
+            (tmp / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
+        if bar is not None:
+            bar.close()
+            bar = None
+        _publish(tmp, out)
     except KeyboardInterrupt:
         print(f"\n{PROG}: interrupted, nothing written", file=sys.stderr)
         return 130
     finally:
         if bar is not None:
             bar.close()
-
-    from kite_env.metrics import compute_metrics, write_timeseries
-    from kite_env.plots import make_plots
-
-    metrics = {"policy": args.policy, "wind_seed": cfg.wind.seed, **compute_metrics(log, cfg)}
-    out.resolve().parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.resolve().parent))
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the result folder gets the usual permissions
-        import yaml
-
-        with open(tmp / "metrics.json", "w") as fh:
-            json.dump(metrics, fh, indent=2, allow_nan=False)
-        with open(tmp / "config.yaml", "w") as fh:
-            yaml.safe_dump(cfg.to_dict(), fh, sort_keys=False)
-        (tmp / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
-        write_timeseries(log, tmp)
-        make_plots(log, cfg, tmp)
-        _publish(tmp, out)
-    except KeyboardInterrupt:
-        print(f"\n{PROG}: interrupted, nothing written", file=sys.stderr)
-        return 130
-    finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    if metrics["crashed"]:
-        print(f"{PROG}: warning: the flight ended early at t = {metrics['sim_time_s']:.2f} s "
-              f"({metrics['termination_reason']}); results written to {out}", file=sys.stderr)
+    for name, m in results:
+        rows = m.get("episode_rows") or [m]
+        for r in rows:
+            if r["crashed"]:
+                print(f"{PROG}: warning: {name}, episode {r.get('episode', 0)}: the flight ended early at t = "
+                      f"{r['sim_time_s']:.2f} s ({r['termination_reason']}); results written to {out}",
+                      file=sys.stderr)
     if not args.quiet:
-        print(summary(metrics))
+        if args.compare:
+            print(compare_table(results)[0], end="")
+        else:
+            m = results[0][1]
+            print(summary(m))
+            if m["episodes"] > 1:
+                print(f"  episodes: {m['episodes']}, return {m['episode_return_mean']:.4g} +- "
+                      f"{m['episode_return_std']:.3g}")
         print(f"{PROG}: wrote {', '.join(sorted(p.name for p in out.iterdir()))} to {out}")
     return 0
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import time
 
 import gymnasium as gym
 import numpy as np
@@ -94,7 +95,9 @@ class KiteFigureEightEnv(gym.Env):
     The KCU at the crossing of the figure-eight (or a uniformly drawn path point with ``env.random_start``), flying
     along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]``; the wing in
     static aeroelastic equilibrium on its bridle. Wind speed, turbulence intensity and turbulence realisation are drawn
-    from ``self.np_random`` (ranges in the ``env`` section).
+    from ``self.np_random`` (ranges in the ``env`` section). With ``env.randomize = false`` nothing is drawn: the
+    ``wind`` section as configured, the start at the crossing at ``sim.initial_speed_mps`` (``kite-eval``).
+    ``reset(options={"wind_seed": n})`` fixes the turbulence realisation.
 
     ## Episode End
 
@@ -104,9 +107,9 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Arguments
 
-    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None)``: ``config`` is a
-    :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
-    ``"section.key=value"`` strings applied on top. ``render_mode`` is ``"rgb_array"`` (flight path and deformed
+    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None, wing=None)``: ``config`` is
+    a :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
+    ``"section.key=value"`` strings applied on top; ``wing`` an :class:`kite_env.fsi.AeroelasticWing` to reuse. ``render_mode`` is ``"rgb_array"`` (flight path and deformed
     wing as a uint8 image) or ``"human"`` (the same in a matplotlib window).
 
     ## Version History
@@ -116,7 +119,8 @@ class KiteFigureEightEnv(gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
-    def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None):
+    def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None,
+                 wing=None):
         if isinstance(config, Config):
             base = config
         elif isinstance(config, dict):
@@ -142,6 +146,9 @@ class KiteFigureEightEnv(gym.Env):
         ctrl = cfg.control if cfg.env.force_controller else dataclasses.replace(cfg.control, k3_m=0.0)
         self._ctrl_cfg = ctrl
         self.sim: FlightSimulator | None = None  # built on the first reset (the wing mesh is reused afterwards)
+        self._wing = wing
+        #: optional :class:`kite_env.flight.FlightRecorder`: gets every physics step (kite-eval's time series)
+        self.recorder = None
         self.rec: StepRecord | None = None
         self._trail: list[np.ndarray] = []
         self._fig = None
@@ -151,17 +158,30 @@ class KiteFigureEightEnv(gym.Env):
         super().reset(seed=seed)
         env = self.cfg.env
         last_error = None
-        for _ in range(env.reset_attempts):
+        options = options or {}
+        unknown = set(options) - {"wind_seed"}
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)} (valid: 'wind_seed')")
+        last_error = None
+        for _ in range(env.reset_attempts if env.randomize else 1):
             rng = self.np_random
-            wind_speed = float(rng.uniform(env.wind_speed_min_mps, env.wind_speed_max_mps))
-            ti = float(rng.uniform(0.0, env.turbulence_intensity_max)) if env.turbulence_intensity_max > 0 else 0.0
-            wind_seed = int(rng.integers(0, 2**31 - 1))
-            s0 = float(rng.uniform(0.0, 2.0 * math.pi)) if env.random_start else 0.0
-            v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
+            if env.randomize:
+                wind_speed = float(rng.uniform(env.wind_speed_min_mps, env.wind_speed_max_mps))
+                ti = (float(rng.uniform(0.0, env.turbulence_intensity_max)) if env.turbulence_intensity_max > 0
+                      else 0.0)
+                wind_seed = int(rng.integers(0, 2**31 - 1))
+                s0 = float(rng.uniform(0.0, 2.0 * math.pi)) if env.random_start else 0.0
+                v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
+            else:  # the configured conditions (kite-eval): nothing drawn
+                wind_speed, ti = self.cfg.wind.speed_mps, self.cfg.wind.turbulence_intensity
+                wind_seed, s0, v0 = self.cfg.wind.seed, 0.0, self.cfg.sim.initial_speed_mps
+            if "wind_seed" in options:
+                wind_seed = int(options["wind_seed"])
             wind_cfg = dataclasses.replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)
             wind = WindField(wind_cfg)
             if self.sim is None:
-                self.sim = FlightSimulator(self.cfg, wind)
+                self.sim = FlightSimulator(self.cfg, wind, self._wing)
+                self._wing = None
             else:
                 self.sim.wind = wind
             try:
@@ -170,8 +190,7 @@ class KiteFigureEightEnv(gym.Env):
             except SimulationError as exc:
                 last_error = exc
         else:
-            raise RuntimeError(f"reset failed {env.reset_attempts} times: the wing did not converge at the drawn "
-                               f"start ({last_error})")
+            raise RuntimeError(f"reset failed: the wing did not converge at the start ({last_error})")
         self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
         self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
         self.s_hint = s0
@@ -180,6 +199,9 @@ class KiteFigureEightEnv(gym.Env):
         self.episode_info = {"wind_speed_mps": wind_speed, "turbulence_intensity": ti, "wind_seed": wind_seed,
                              "start_s": s0, "initial_speed_mps": v0}
         self._trail = [self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4])]
+        if self.recorder is not None:
+            self.recorder.start(self.sim, self.rec, s0, self.L_B, self.L_D,
+                                LineActuator.force_ratio(self.rec.line_tension))
         obs, feats = self._observe(self.rec)
         if not np.all(np.isfinite(obs)):
             raise RuntimeError(f"reset produced a non-finite observation: {obs}")
@@ -204,12 +226,15 @@ class KiteFigureEightEnv(gym.Env):
         self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
         reason = None
         for _ in range(self.n_physics):
+            t0 = time.perf_counter()
             try:
                 rec = self.sim.step(self.L_B, self.L_D)
             except SimulationError as exc:
                 reason = exc.reason
                 break
             self.rec = rec
+            if self.recorder is not None:
+                self.recorder.record(rec, self.L_B, self.L_D, ainfo, time.perf_counter() - t0)
             r_kcu = rec.state.r[4]
             if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * cfg.dynamics.tether_length_m:
                 reason = "ground"

@@ -113,6 +113,41 @@ def test_make_vec_sync():
     envs.close()
 
 
+def test_subproc_vec_env_steps_in_worker_processes():
+    """SB3's SubprocVecEnv (the env pickles into the workers): two workers give the same first observation as an
+    env in this process with the same seeds."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    venv = SubprocVecEnv([lambda: KiteFigureEightEnv(overrides=["env.max_episode_s=0.04"]) for _ in range(2)])
+    venv.seed(5)
+    obs = venv.reset()
+    ref = [KiteFigureEightEnv().reset(seed=5 + i)[0] for i in range(2)]
+    np.testing.assert_array_equal(obs, np.stack(ref))
+    for _ in range(2):
+        obs, r, done, infos = venv.step(np.zeros((2, 1), np.float32))
+    assert np.all(np.isfinite(obs)) and np.all(done)  # the 0.04 s episodes end after two control steps
+    assert [i["termination_reason"] for i in infos] == ["time limit", "time limit"]
+    venv.close()
+
+
+def test_evaluation_conditions_use_the_wind_section_as_configured():
+    """env.randomize = false (kite-eval): nothing drawn; the wind section's speed, turbulence intensity and seed are
+    used as they are, reset(options={"wind_seed": n}) picks the realisation; an unknown option is refused."""
+    over = ["env.randomize=false", "env.wind_speed_min_mps=8", "env.wind_speed_max_mps=9", "env.random_start=true",
+            "wind.speed_mps=6", "wind.turbulence_intensity=0.1", "wind.seed=11", "sim.initial_speed_mps=20"]
+    env = KiteFigureEightEnv(overrides=over)
+    _, info = env.reset(seed=0)
+    assert (info["wind_speed_mps"], info["turbulence_intensity"], info["wind_seed"]) == (6.0, 0.1, 11)
+    assert (info["start_s"], info["initial_speed_mps"]) == (0.0, 20.0)
+    _, info2 = env.reset(seed=1, options={"wind_seed": 3})
+    assert info2["wind_seed"] == 3 and env.sim.wind.cfg.seed == 3
+    with pytest.raises(ValueError, match="unknown reset option"):
+        env.reset(options={"wind": 1})
+    rnd = KiteFigureEightEnv(overrides=over[1:])  # randomize (default): the env ranges apply
+    _, info = rnd.reset(seed=0)
+    assert 8.0 <= info["wind_speed_mps"] <= 9.0 and info["wind_seed"] != 11
+
+
 def test_bad_env_config_is_one_clear_error():
     with pytest.raises(ConfigError, match="env.observation"):
         KiteFigureEightEnv(overrides=["env.observation=position,bogus"])
