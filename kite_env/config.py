@@ -59,6 +59,9 @@ class AeroConfig:
     # luffing (a modelling option, not the paper): below this section CL the load moves from the canopy nodes to the
     # LE and TE nodes (all of it at CL <= 0: a membrane cannot carry a reversed pressure); 0 = off (the paper)
     luffing_cl: float = 0.0  # [-]
+    # point / chord (from the airfoil nose) that Breukels' regression CM is taken about: 0.25 (quarter chord) is the
+    # convention of the open VSM codes, not confirmed for Breukels (aero/breukels.py); 0 = about the nose
+    cm_regression_ref_over_c: float = 0.25  # [-]
 
 
 @dataclass(frozen=True)
@@ -279,6 +282,9 @@ def _validate(cfg: Config) -> None:
                 raise ConfigError(f"config key '{key}' must be >= 0, got {v!r}")
     if cfg.aero.moment_chord_power not in (1.0, 2.0):
         raise ConfigError(f"config key 'aero.moment_chord_power' must be 1 or 2, got {cfg.aero.moment_chord_power}")
+    if not 0.0 <= cfg.aero.cm_regression_ref_over_c <= 1.0:
+        raise ConfigError("config key 'aero.cm_regression_ref_over_c' must lie in [0, 1], "
+                          f"got {cfg.aero.cm_regression_ref_over_c}")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

@@ -262,7 +262,7 @@ class AeroelasticWing:
             state.x[sec], self.mesh.section_tube_d, self.mesh.section_width,
             flight.v_kite, flight.omega, flight.v_wind, self.cfg.aero.rho_kg_m3,
             x_sec_prev=self._sec_prev if dt else None, dt=dt, moment_chord_power=self.cfg.aero.moment_chord_power,
-            luffing_cl=self.cfg.aero.luffing_cl,
+            luffing_cl=self.cfg.aero.luffing_cl, cm_regression_ref_over_c=self.cfg.aero.cm_regression_ref_over_c,
         )
 
     def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
@@ -571,6 +571,7 @@ class _AeroLoad:
         _, J = load_jacobian(
             state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
             w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt,
-            moment_chord_power=w.cfg.aero.moment_chord_power, luffing_cl=w.cfg.aero.luffing_cl)
+            moment_chord_power=w.cfg.aero.moment_chord_power, luffing_cl=w.cfg.aero.luffing_cl,
+            cm_regression_ref_over_c=w.cfg.aero.cm_regression_ref_over_c)
         self.n_tangent += 1
         return self.asm.block_data(-self.scale * J)

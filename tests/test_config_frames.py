@@ -38,6 +38,9 @@ def test_overrides_and_errors(tmp_path):
         load_config(tmp_path / "missing.yaml")
     with pytest.raises(ConfigError, match="section.key=value"):
         load_config(overrides=["fsi"])
+    assert load_config(overrides=["aero.cm_regression_ref_over_c=0"]).aero.cm_regression_ref_over_c == 0.0
+    with pytest.raises(ConfigError, match="'aero.cm_regression_ref_over_c' must lie in"):
+        load_config(overrides=["aero.cm_regression_ref_over_c=1.5"])
 
 
 def test_kite_frame_orthonormal_right_handed_and_definition():

@@ -35,9 +35,11 @@ regression states that its CM column is the "pitching moment coefficient (dimens
 (awegroup/Vortex-Step-Method, docs/AirfoilAerodynamics.md, "Data Format Standards", commit 46fd9f83), and
 OpenSourceAWE/VortexStepMethod.jl issue #17 moves the regression CM with ``M_x = M_quarter + L (x - 0.25)``. We
 therefore take the quarter chord (``X_REF_OVER_C_DEFAULT = 0.25``) and expose the point as ``x_ref_over_c`` in
-:mod:`kite_env.aero.loads`. That is the convention of those codes, not a confirmed statement of Breukels.
-For another reference point the regression moment is transferred from the quarter chord,
-``CM_x = CM_c/4 + (x_ref/c - 0.25) C_N`` with ``C_N = CL cos a + CD sin a`` (normal force along e_z, a force aft
+:mod:`kite_env.aero.loads`. That is the convention of those codes, not a confirmed statement of Breukels, so the
+point the regression CM itself is taken about is a separate parameter ``cm_ref_over_c`` (default the quarter chord,
+``CM_REGRESSION_REF_DEFAULT``; config key ``aero.cm_regression_ref_over_c``), for sensitivity studies (e.g. 0 =
+about the airfoil nose). The regression moment is transferred from that point to the output reference point,
+``CM_x = CM_reg + (x_ref/c - cm_ref/c) C_N`` with ``C_N = CL cos a + CD sin a`` (normal force along e_z, a force aft
 of the reference point is nose-down), before the blend; the flat-plate moment is already about ``x_ref``. The
 section's line of action, hence the nodal loads, then do not depend on the chosen reference point.
 
@@ -55,6 +57,8 @@ ALPHA_POLY_MAX_DEG = 20.0
 ALPHA_FP_MIN_DEG = 30.0
 #: Default moment reference point / chord (quarter chord, see module docstring for the source).
 X_REF_OVER_C_DEFAULT = 0.25
+#: Default point / chord the regression CM is taken about (quarter chord, an assumption: module docstring).
+CM_REGRESSION_REF_DEFAULT = 0.25
 
 # Breukels' LEI airfoil constants C20..C62 (physics_facts.md 1.3; [S1], [S2], [S3] agree).
 C20, C21, C22 = -0.008011, -0.000336, 0.000992
@@ -143,7 +147,7 @@ def flat_plate_coefficients(alpha, x_ref_over_c=X_REF_OVER_C_DEFAULT):
     return cn * np.cos(alpha), np.abs(cn * s), -cn * (0.5 - x_ref_over_c)
 
 
-def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT):
+def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT, cm_ref_over_c=CM_REGRESSION_REF_DEFAULT):
     """Section lift, drag and pitching-moment coefficients of an LEI airfoil.
 
     Breukels' regression for |alpha| <= 20 deg, C1 blend to the sign-correct flat-plate law over
@@ -159,15 +163,18 @@ def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT):
     kappa : array float [-]
         Camber ratio, maximum canopy height / chord (Eq. 6).
     x_ref_over_c : float or array [-]
-        Moment reference point / chord, from the airfoil leading edge. The regression CM is defined about the
-        quarter chord and transferred to this point (module docstring).
+        Moment reference point / chord, from the airfoil leading edge. The regression CM is transferred from
+        ``cm_ref_over_c`` to this point (module docstring).
+    cm_ref_over_c : float [-]
+        Point / chord (from the leading edge) the regression CM is taken about; default the quarter chord.
 
     Returns
     -------
     CL, CD, CM : arrays of the broadcast shape [-]
         CM positive nose-up.
     """
-    at_quarter_chord = np.ndim(x_ref_over_c) == 0 and float(x_ref_over_c) == X_REF_OVER_C_DEFAULT
+    cm_ref = float(cm_ref_over_c)
+    at_quarter_chord = np.ndim(x_ref_over_c) == 0 and float(x_ref_over_c) == cm_ref
     alpha, t, kappa, x_ref = np.broadcast_arrays(
         np.asarray(alpha, float), np.asarray(t, float), np.asarray(kappa, float), np.asarray(x_ref_over_c, float)
     )
@@ -183,8 +190,8 @@ def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT):
     cd = cd2 * ac * ac + cd0 + 2.0 * cd2 * ac * da
     cm = cm2 * ac * ac + cm0 + 2.0 * cm2 * ac * da
     if not at_quarter_chord:
-        # regression CM is about the quarter chord: move it to x_ref with the normal force C_N = CL cos a + CD sin a
-        cm = cm + (x_ref.ravel() - X_REF_OVER_C_DEFAULT) * (cl * np.cos(a_rad) + cd * np.sin(a_rad))
+        # regression CM is about cm_ref: move it to x_ref with the normal force C_N = CL cos a + CD sin a
+        cm = cm + (x_ref.ravel() - cm_ref) * (cl * np.cos(a_rad) + cd * np.sin(a_rad))
     s = _smoothstep((np.abs(a) - ALPHA_POLY_MAX_DEG) / (ALPHA_FP_MIN_DEG - ALPHA_POLY_MAX_DEG))
     if np.any(s > 0.0):
         cl_fp, cd_fp, cm_fp = flat_plate_coefficients(a_rad, x_ref.ravel())

@@ -87,8 +87,9 @@ COEF = np.array(
 
 
 @njit(**_JIT)
-def _lei_coefficients(alpha, t, kappa, x_ref):
-    """``breukels.lei_coefficients`` of one section: (CL, CD, CM) for alpha [rad], t, kappa, x_ref / c."""
+def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25):
+    """``breukels.lei_coefficients`` of one section: (CL, CD, CM) for alpha [rad], t, kappa, x_ref / c and the
+    point cm_ref / c the regression CM is taken about."""
     t2 = t * t
     k2 = kappa * kappa
     # poly_coefficients: lambda5..8, CD_2, CD_0, CM_2, CM_0 (alpha in degrees)
@@ -107,9 +108,9 @@ def _lei_coefficients(alpha, t, kappa, x_ref):
     cl = ((l5 * ac + l6) * ac + l7) * ac + l8 + ((3.0 * l5 * ac + 2.0 * l6) * ac + l7) * da
     cd = cd2 * ac * ac + cd0 + 2.0 * cd2 * ac * da
     cm = cm2 * ac * ac + cm0 + 2.0 * cm2 * ac * da
-    if x_ref != _X_REF_DEFAULT:
-        # regression CM is about the quarter chord: transfer with C_N = CL cos a + CD sin a
-        cm = cm + (x_ref - _X_REF_DEFAULT) * (cl * math.cos(alpha) + cd * math.sin(alpha))
+    if x_ref != cm_ref:
+        # regression CM is about cm_ref: transfer with C_N = CL cos a + CD sin a
+        cm = cm + (x_ref - cm_ref) * (cl * math.cos(alpha) + cd * math.sin(alpha))
     # C1 blend (smoothstep) to the sign-correct flat-plate law over 20..30 deg
     u = (abs(a) - _ALPHA_POLY_MAX_DEG) / (_ALPHA_FP_MIN_DEG - _ALPHA_POLY_MAX_DEG)
     u = min(max(u, 0.0), 1.0)
@@ -125,7 +126,7 @@ def _lei_coefficients(alpha, t, kappa, x_ref):
 
 @njit(**_JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
-                         has_span, scal, vec, node, zeta, axes, luff=0.0):
+                         has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
 
     Parameters
@@ -155,6 +156,8 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
     luff : float
         ``aero.luffing_cl`` (0: off): below this CL the share ``1 - CL/luff`` of the section load moves to the LE and
         TE nodes (``loads.distribute`` with ``canopy_share``).
+    cm_ref : float [-]
+        Point / chord (from the leading edge) the regression CM is taken about (``breukels.lei_coefficients``).
 
     Outputs (written)
     -----------------
@@ -265,7 +268,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         alpha = math.atan2(uz, ux)
         speed2 = ux * ux + uz * uz
         t_c = d * inv_c  # Eq. (5)
-        cl, cd, cm = _lei_coefficients(alpha, t_c, kappa, x_ref)
+        cl, cd, cm = _lei_coefficients(alpha, t_c, kappa, x_ref, cm_ref)
         # ---------------------------------------------------------------- section loads, Eq. (7)-(9)
         hcw = half_rho * c * width[i]
         k = hcw * math.sqrt(speed2)
@@ -323,7 +326,8 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,
-                         x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0, luffing_cl=0.0):
+                         x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0, luffing_cl=0.0,
+                         cm_ref_over_c=0.25):
     """Fields of :class:`kite_env.aero.loads.SectionLoads` from the compiled kernel (same arguments as
     :func:`kite_env.aero.loads.section_loads`, Eq. 2-9).
 
@@ -338,6 +342,7 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
     dt : float [s], optional
     x_ref_over_c : float [-]
     spanwise : (n_sec, 3) float, optional
+    moment_chord_power, luffing_cl, cm_ref_over_c : float
 
     Returns
     -------
@@ -373,7 +378,7 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
                          np.ascontiguousarray(w), np.ascontiguousarray(v_kite, dtype=float),
                          np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c),
                          float(moment_chord_power), span,
-                         has_span, scal, vec, node, zeta, axes, float(luffing_cl))
+                         has_span, scal, vec, node, zeta, axes, float(luffing_cl), float(cm_ref_over_c))
     alpha, cl, cd, cm, moment, s_ref, q_dyn, chord, t, kappa = scal
     lift, drag, v_app = vec
     nodal, local = node

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kite_env.aero.breukels import X_REF_OVER_C_DEFAULT, lei_coefficients
+from kite_env.aero.breukels import CM_REGRESSION_REF_DEFAULT, X_REF_OVER_C_DEFAULT, lei_coefficients
 from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.sections import (SectionGeometry, apparent_wind, cross, inflow, section_geometry,
                                     spanwise_directions)
@@ -182,6 +182,7 @@ def section_loads(
     backend: str = "auto",
     moment_chord_power: float = 2.0,
     luffing_cl: float = 0.0,
+    cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -221,6 +222,10 @@ def section_loads(
         treated as luffing (a membrane cannot carry a reversed pressure difference): the share
         ``w = clip(CL / luffing_cl, 0, 1)`` of its load stays on all nodes, the rest is carried by the LE and TE nodes
         only (:func:`distribute`); force, moment and coefficients are unchanged. A modelling option, not the paper.
+    cm_regression_ref_over_c : float [-]
+        Point / chord (from the airfoil leading edge) that Breukels' regression CM is taken about (default the
+        quarter chord, an assumption: :mod:`kite_env.aero.breukels`). Unlike ``x_ref_over_c`` this changes the
+        section's centre of pressure, hence the nodal loads.
 
     Returns
     -------
@@ -228,7 +233,8 @@ def section_loads(
     """
     if resolve_backend(backend) == "numba":
         return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
-                                                  x_ref_over_c, spanwise, moment_chord_power, luffing_cl))
+                                                  x_ref_over_c, spanwise, moment_chord_power, luffing_cl,
+                                                  cm_regression_ref_over_c))
     x_sec = np.asarray(x_sec, dtype=float)
     geom = section_geometry(x_sec, tube_d, spanwise)
     v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt)
@@ -237,7 +243,7 @@ def section_loads(
     u_loc, alpha = inflow(v_a, geom)
     u_loc[:, 1] = 0.0
     speed2 = u_loc[:, 0] ** 2 + u_loc[:, 2] ** 2
-    CL, CD, CM = lei_coefficients(alpha, geom.t, geom.kappa, x_ref_over_c)
+    CL, CD, CM = lei_coefficients(alpha, geom.t, geom.kappa, x_ref_over_c, cm_regression_ref_over_c)
     hcw = (0.5 * rho) * c * np.asarray(width, dtype=float)
     # e_D = (u_x, 0, u_z)/V and e_L = e_D × e_y = (-u_z, 0, u_x)/V; with k = q c w / V = rho c w V / 2 no division
     # by V is needed (V = 0 gives zero loads)
@@ -269,6 +275,7 @@ def load_jacobian(
     h: float = 1e-6,
     moment_chord_power: float = 2.0,
     luffing_cl: float = 0.0,
+    cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
 
@@ -293,7 +300,8 @@ def load_jacobian(
     n_sec, m, _ = x_sec.shape
     p = 3 * m
     base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c,
-                         moment_chord_power=moment_chord_power, luffing_cl=luffing_cl)
+                         moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
+                         cm_regression_ref_over_c=cm_regression_ref_over_c)
     tan = spanwise_directions(x_sec[:, 0])
     # stack: copy q perturbs coordinate q (= 3 b + l) of every section
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
@@ -306,7 +314,8 @@ def load_jacobian(
         xs.reshape(p * n_sec, m, 3), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
         v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
         None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan),
-        moment_chord_power=moment_chord_power, luffing_cl=luffing_cl)
+        moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
+        cm_regression_ref_over_c=cm_regression_ref_over_c)
     df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
     return base.nodal_forces, df.transpose(1, 2, 0).copy()
 

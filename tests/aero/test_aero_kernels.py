@@ -65,6 +65,8 @@ CASES = [
     ("spanwise override, dt", 6, dict(v_kite=np.array([-20.0, 0.0, 0.0]), omega=np.array([0.0, 0.3, 0.0]),
                                       v_wind=flow(8.0, 5.0), dt=0.02, spanwise="random")),
     ("flat sections", 7, dict(v_kite=np.zeros(3), omega=np.zeros(3), v_wind=flow(22.0, 10.0), flat=(0, 5, 18, 36))),
+    ("regression CM about the nose", 8, dict(v_kite=np.zeros(3), omega=np.zeros(3), v_wind=flow(25.0, 8.0),
+                                              cm_regression_ref_over_c=0.0)),
 ]
 
 

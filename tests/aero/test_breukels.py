@@ -183,3 +183,17 @@ def test_moment_transfer_to_other_reference_points():
         np.testing.assert_allclose(cl_x, cl, rtol=1e-15)
         np.testing.assert_allclose(cd_x, cd, rtol=1e-15)
         np.testing.assert_allclose(cm_x, cm_qc + (x_ref - 0.25) * cn, atol=1e-13)
+
+
+def test_regression_moment_point_moves_the_centre_of_pressure():
+    # the regression CM taken about cm_ref instead of c/4: for any output point x_ref the
+    # centre of pressure x_cp = x_ref - CM_x / C_N moves by (cm_ref - 1/4) c; CL and CD are unchanged
+    a = np.deg2rad(np.linspace(-19.0, 19.0, 39))
+    cl, cd, cm_qc = lei_coefficients(a, 0.1, 0.095)
+    cn = cl * np.cos(a) + cd * np.sin(a)
+    for cm_ref in (0.0, 0.1, 0.25):
+        for x_ref in (0.0, 0.25, 0.6):
+            cl_x, cd_x, cm_x = lei_coefficients(a, 0.1, 0.095, x_ref, cm_ref)
+            np.testing.assert_allclose(cl_x, cl, rtol=1e-15)
+            np.testing.assert_allclose(cd_x, cd, rtol=1e-15)
+            np.testing.assert_allclose(x_ref - cm_x / cn, (0.25 - cm_qc / cn) + (cm_ref - 0.25), atol=1e-12)
