@@ -1,0 +1,110 @@
+"""Reduced-order wing: a small MLP fitted to samples of the full aeroelastic wing (:mod:`.samples`).
+
+:class:`SurrogateWing` maps the 30 inputs of :data:`~kite_env.surrogate.samples.INPUT_NAMES` to the 17 outputs of
+:data:`~kite_env.surrogate.samples.OUTPUT_NAMES` with a tanh multilayer perceptron on normalised inputs and
+outputs. Inference is plain NumPy (batched over rows); the weights are fitted with torch by
+``scripts/train_surrogate.py`` and stored as ``.npz`` with their provenance (the samples' git commit, config, mesh
+and count, the training settings and the held-out errors).
+
+Envelope: the per-input range of the training samples. :meth:`SurrogateWing.outside` names the inputs of a query
+that lie more than ``margin`` times that range beyond it, so that a caller can report or refuse states far from
+what the full model was sampled at.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES
+
+
+@dataclass
+class SurrogateWing:
+    """MLP ``y = (tanh(... tanh(x_n W_0 + b_0) ...) W_L + b_L) * y_std + y_mean`` with ``x_n = (x - x_mean) / x_std``.
+
+    Attributes
+    ----------
+    weights, biases : lists of (n_in, n_out) and (n_out,) float arrays, one per layer
+    x_mean, x_std : (30,) float, input normalisation
+    y_mean, y_std : (17,) float, output normalisation
+    x_min, x_max : (30,) float, range of the training inputs (the envelope)
+    meta : dict, provenance and validation errors
+    """
+
+    weights: list[np.ndarray]
+    biases: list[np.ndarray]
+    x_mean: np.ndarray
+    x_std: np.ndarray
+    y_mean: np.ndarray
+    y_std: np.ndarray
+    x_min: np.ndarray
+    x_max: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if len(self.weights) != len(self.biases) or not self.weights:
+            raise ValueError("a SurrogateWing needs one bias per weight matrix and at least one layer")
+        if self.weights[0].shape[0] != len(INPUT_NAMES) or self.weights[-1].shape[1] != len(OUTPUT_NAMES):
+            raise ValueError(f"layer shapes {[w.shape for w in self.weights]} do not map {len(INPUT_NAMES)} inputs "
+                             f"to {len(OUTPUT_NAMES)} outputs")
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """Outputs (n, 17) for inputs (n, 30) (or (17,) for (30,))."""
+        x = np.asarray(x, dtype=float)
+        h = (np.atleast_2d(x) - self.x_mean) / self.x_std
+        last = len(self.weights) - 1
+        for i, (W, b) in enumerate(zip(self.weights, self.biases)):
+            h = h @ W + b
+            if i < last:
+                h = np.tanh(h)
+        y = h * self.y_std + self.y_mean
+        return y[0] if x.ndim == 1 else y
+
+    def outside(self, x: np.ndarray, margin: float = 0.1) -> list[str]:
+        """Names of the inputs of one query ``x`` (30,) beyond the training range by more than ``margin`` x range."""
+        x = np.asarray(x, dtype=float)
+        span = self.x_max - self.x_min
+        lo, hi = self.x_min - margin * span, self.x_max + margin * span
+        return [INPUT_NAMES[i] for i in np.flatnonzero((x < lo) | (x > hi))]
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        arrays = {f"W{i}": w.astype(np.float32) for i, w in enumerate(self.weights)}
+        arrays.update({f"b{i}": b.astype(np.float32) for i, b in enumerate(self.biases)})
+        np.savez_compressed(path, **arrays, x_mean=self.x_mean, x_std=self.x_std, y_mean=self.y_mean,
+                            y_std=self.y_std, x_min=self.x_min, x_max=self.x_max, meta=json.dumps(self.meta),
+                            input_names=np.array(INPUT_NAMES), output_names=np.array(OUTPUT_NAMES))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "SurrogateWing":
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"surrogate weights '{path}' do not exist")
+        try:
+            z = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"surrogate weights '{path}' are not a readable .npz file: {exc}") from None
+        with z:
+            if tuple(z["input_names"]) != INPUT_NAMES or tuple(z["output_names"]) != OUTPUT_NAMES:
+                raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
+            n = sum(1 for k in z.files if k.startswith("W"))
+            W = [z[f"W{i}"].astype(float) for i in range(n)]
+            b = [z[f"b{i}"].astype(float) for i in range(n)]
+            return cls(W, b, z["x_mean"], z["x_std"], z["y_mean"], z["y_std"], z["x_min"], z["x_max"],
+                       json.loads(str(z["meta"])))
+
+
+def output_errors(y_true: np.ndarray, y_pred: np.ndarray) -> dict:
+    """Per-output RMS errors [SI units] and the bridle-force error relative to the mean traction: the RMS over
+    samples and the 12 force components of the error, over the mean of ``|sum of F_b|`` (the wing's pull)."""
+    err = np.asarray(y_pred, float) - np.asarray(y_true, float)
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    traction = float(np.mean(np.linalg.norm(np.asarray(y_true)[:, :12].reshape(-1, 4, 3).sum(axis=1), axis=1)))
+    force_rms = float(np.sqrt(np.mean(err[:, :12] ** 2)))
+    return {"rms": {name: float(v) for name, v in zip(OUTPUT_NAMES, rms)}, "mean_traction_N": traction,
+            "force_rms_N": force_rms, "force_rms_rel_traction": force_rms / traction}
