@@ -207,8 +207,8 @@ def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
     if cfg.kite.name not in KITES:
         raise ConfigError(f"config key 'kite.name': unknown kite {cfg.kite.name!r} (valid: {', '.join(sorted(KITES))})")
     env = KiteFigureEightEnv(config=evaluation_config(cfg, randomize=args.randomize))
-    seed = cfg.wind.seed if args.seed is None else args.seed
-    return _Job(spec, label, env.cfg, env, make_agent(spec, env, seed=seed))
+    # --seed is applied as wind.seed, so the config's seed is the seed of the first episode
+    return _Job(spec, label, env.cfg, env, make_agent(spec, env, seed=cfg.wind.seed))
 
 
 def _evaluate(job: _Job, args, progress) -> tuple:
@@ -217,7 +217,7 @@ def _evaluate(job: _Job, args, progress) -> tuple:
     from kite_env.metrics import compute_metrics
 
     cfg = job.cfg
-    seed = cfg.wind.seed if args.seed is None else args.seed
+    seed = cfg.wind.seed  # --seed, applied as wind.seed (main)
     first_log, first_metrics, rows = None, None, []
     for i in range(args.episodes):
         options = None if args.randomize else {"wind_seed": seed + i}
@@ -260,7 +260,7 @@ def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], ar
     out = {"policy": job.spec, "wind_seed": rows[0]["wind_seed"], **metrics,
            "episode_return": rows[0]["episode_return"], **_episode_stats(rows), "episode_rows": rows}
     with open(folder / "metrics.json", "w") as fh:
-        json.dump(out, fh, indent=2, allow_nan=False, default=_json_value)
+        json.dump(out, fh, indent=2, allow_nan=False)
     _write_csv(folder / "episodes.csv", rows)
     with open(folder / "config.yaml", "w") as fh:
         yaml.safe_dump(job.cfg.to_dict(), fh, sort_keys=False)
@@ -268,12 +268,6 @@ def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], ar
     write_timeseries(log, folder)
     make_plots(log, job.cfg, folder)
     return out
-
-
-def _json_value(o):
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 #: columns of the comparison table: (header, function of the run's metrics.json)
@@ -347,9 +341,6 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
         return int(exc.code or 0)
-    from agents.policies import PolicyError
-    from kite_env.config import ConfigError
-
     overrides = list(args.overrides)
     if args.duration is not None:
         if not (math.isfinite(args.duration) and args.duration > 0):
@@ -372,9 +363,7 @@ def main(argv=None) -> int:
                 jobs.append(_Job(spec, label, run_dir=run))
             else:
                 jobs.append(_prepare(spec, args, overrides, label))
-    except (ConfigError, PolicyError) as exc:
-        return _fail(str(exc))
-    except ValueError as exc:
+    except ValueError as exc:  # ConfigError and PolicyError are ValueErrors
         return _fail(str(exc))
     out = Path(args.out)
     why = _check_out(out, args.force)

@@ -148,12 +148,7 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     l = np.empty(4)
     T = np.empty(4)
     for i in range(4):
-        d0 = r[i, 0] - r[_KCU, 0]
-        d1 = r[i, 1] - r[_KCU, 1]
-        d2 = r[i, 2] - r[_KCU, 2]
-        li = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        e0, e1, e2 = d0 / li, d1 / li, d2 / li
-        ldot = e0 * (v[i, 0] - v[_KCU, 0]) + e1 * (v[i, 1] - v[_KCU, 1]) + e2 * (v[i, 2] - v[_KCU, 2])
+        li, e0, e1, e2, ldot = _line_geometry(r, v, i, _KCU)
         Ti = k_c * (li - rest[i]) + c_c * ldot
         if Ti < 0.0:  # a line cannot push (np.maximum(T, 0), nan propagates)
             Ti = 0.0
@@ -220,12 +215,7 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     fp = np.empty((4, 3))
     for q in range(4):
         i, j = pair_index(q)
-        d0 = r[i, 0] - r[j, 0]
-        d1 = r[i, 1] - r[j, 1]
-        d2 = r[i, 2] - r[j, 2]
-        lp = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        e0, e1, e2 = d0 / lp, d1 / lp, d2 / lp
-        pdot = e0 * (v[i, 0] - v[j, 0]) + e1 * (v[i, 1] - v[j, 1]) + e2 * (v[i, 2] - v[j, 2])
+        _, e0, e1, e2, pdot = _line_geometry(r, v, i, j)
         c = pair_damping[q] * pdot
         fp[q, 0], fp[q, 1], fp[q, 2] = c * e0, c * e1, c * e2
     for q in range(4):
@@ -286,6 +276,19 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
         a[j, 1] += minv[j] * (-d1 * lc)
         a[j, 2] += minv[j] * (-d2 * lc)
     return a, lam
+
+
+@njit(**_JIT)
+def _line_geometry(r, v, i, j):
+    """Length ``l`` of the segment from mass ``j`` to mass ``i``, its unit vector ``e`` (three floats) and the rate
+    of change of its length ``e · (v_i - v_j)``: ``(l, e0, e1, e2, ldot)``."""
+    d0 = r[i, 0] - r[j, 0]
+    d1 = r[i, 1] - r[j, 1]
+    d2 = r[i, 2] - r[j, 2]
+    l = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    e0, e1, e2 = d0 / l, d1 / l, d2 / l
+    ldot = e0 * (v[i, 0] - v[j, 0]) + e1 * (v[i, 1] - v[j, 1]) + e2 * (v[i, 2] - v[j, 2])
+    return l, e0, e1, e2, ldot
 
 
 @njit(**_JIT)
