@@ -125,17 +125,11 @@ class FlightSimulator:
         yp = np.cross(zp, xp)
         R_base = np.stack([xp, yp, zp], axis=1)
         X = FlightState(v_kite=R_base.T @ v0, omega=np.zeros(3), v_wind=R_base.T @ v_wind)
-        try:
-            # static equilibrium of the wing held by its bridle lines (tips free to move in y_k): the initial shape
-            # and bridle-point positions, so that the flight does not start with the unloaded design tip distance
-            sol = wing.solve(None, X, support="lines", warm=False)
-        except WingConvergenceError as exc:
-            raise SimulationError("wing did not converge at the initial state", str(exc).splitlines()[0]) from exc
-        q0 = sol.nodes[wing.bridle].copy()
+        q0, F_b0, k_pairs = self._start_wing(X)
         kcu = wing.kcu_position()
         e_line = kcu - q0
         e_line /= np.linalg.norm(e_line, axis=1, keepdims=True)
-        T0 = np.maximum(np.einsum("ij,ij->i", -sol.F_b, -e_line), 1.0)  # wing pull along each line [N]
+        T0 = np.maximum(np.einsum("ij,ij->i", -F_b0, -e_line), 1.0)  # wing pull along each line [N]
         k_c = cfg.dynamics.line_stiffness_N_per_m
         # KCU on the symmetry plane at the stretched power-line length from A and C
         L_pow = cfg.dynamics.power_line_length_m + 0.5 * (T0[0] + T0[2]) / k_c
@@ -151,7 +145,6 @@ class FlightSimulator:
         l_B, l_D = np.linalg.norm(r[B] - r_kcu), np.linalg.norm(r[D] - r_kcu)
         self.L_B0 = float(0.5 * (l_B + l_D) - 0.5 * (T0[1] + T0[3]) / k_c)
         self.L_D0 = self.L_B0
-        k_pairs = tip_stiffness(wing, q0, X, sol)
         self.pair_stiffness = k_pairs
         self.particles = ParticleSystem(cfg.dynamics, self.tip_lengths, k_pairs, cfg.aero.rho_kg_m3)
         self.particles.set_steering(self.L_B0, self.L_D0)
@@ -159,6 +152,19 @@ class FlightSimulator:
         self.state = ParticleState(r, v)
         self.t = t0
         return self._solve_wing(first=True)
+
+    def _start_wing(self, X: FlightState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The wing at the start: static equilibrium held by its bridle lines (tips free to move in y_k) at the
+        flight state ``X`` (frame of the start, no rotation), so that the flight does not start with the unloaded
+        design tip distance. Returns the bridle points ``q0`` (4, 3) [m] and forces ``F_b`` (4, 3) [N] in K and the
+        tip-pair stiffness (4,) [N/m] (:func:`tip_stiffness`). The solution is the wing's warm start."""
+        wing = self.wing
+        try:
+            sol = wing.solve(None, X, support="lines", warm=False)
+        except WingConvergenceError as exc:
+            raise SimulationError("wing did not converge at the initial state", str(exc).splitlines()[0]) from exc
+        q0 = sol.nodes[wing.bridle].copy()
+        return q0, sol.F_b.copy(), tip_stiffness(wing, q0, X, sol)
 
     # ------------------------------------------------------------------ stepping
     def _solve_wing(self, first: bool = False, commit: bool = True, state: ParticleState | None = None,
