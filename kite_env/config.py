@@ -122,7 +122,13 @@ class SimConfig:
     duration_s: float = 60.0  # simulated time [s]
     warmup_s: float = 3.0  # initial transient excluded from the metrics [s]
     initial_speed_mps: float = 22.0  # initial flight speed along the path [m/s]
+    fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
+    surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name
+    surrogate_fallback: bool = False  # surrogate: a state outside the sampled envelope continues in the FE model
 
+
+#: wing models of the flight simulation (sim.fidelity)
+FIDELITIES = ("fe", "surrogate")
 
 #: observation terms of the Gymnasium environment (kite_env.envs), in the order they are stacked
 OBSERVATION_TERMS = ("position", "heading", "line_forces", "path", "rates", "actuator")
@@ -285,6 +291,8 @@ def _validate(cfg: Config) -> None:
     if not 0.0 <= cfg.aero.cm_regression_ref_over_c <= 1.0:
         raise ConfigError("config key 'aero.cm_regression_ref_over_c' must lie in [0, 1], "
                           f"got {cfg.aero.cm_regression_ref_over_c}")
+    if cfg.sim.fidelity not in FIDELITIES:
+        raise ConfigError(f"config key 'sim.fidelity' must be one of {', '.join(FIDELITIES)}, got {cfg.sim.fidelity!r}")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

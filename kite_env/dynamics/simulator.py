@@ -37,6 +37,7 @@ class SimulationError(RuntimeError):
     def __init__(self, reason: str, detail: str = ""):
         super().__init__(f"{reason}: {detail}" if detail else reason)
         self.reason = reason
+        self.detail = detail
 
 
 @dataclass
@@ -56,6 +57,20 @@ class StepRecord:
     constraint_drift: np.ndarray  # (3,) [m] before the projection
 
 
+def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
+    """The flight simulator of ``cfg.sim.fidelity``: :class:`FlightSimulator` (``"fe"``) or
+    :class:`kite_env.dynamics.fast.SurrogateFlightSimulator` (``"surrogate"``, the weights of ``sim.surrogate_path``
+    or the model shipped for ``kite.name``)."""
+    if cfg.sim.fidelity == "surrogate":
+        from kite_env.dynamics.fast import SurrogateFlightSimulator
+        from kite_env.surrogate.model import SurrogateWing
+
+        sw = SurrogateWing.load(cfg.sim.surrogate_path) if cfg.sim.surrogate_path else None
+        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing,
+                                        on_outside="fe" if cfg.sim.surrogate_fallback else "error")
+    return FlightSimulator(cfg, wind, wing)
+
+
 class FlightSimulator:
     """The complete flight model: five masses, bridle, tether and the aeroelastic wing.
 
@@ -71,6 +86,9 @@ class FlightSimulator:
         :func:`kite_env.dynamics.kernels.particle_accelerations` (same results to round-off); ``"auto"``: see
         :func:`kite_env.structure.kernels.resolve_backend`.
     """
+
+    #: the wing model now flying (the fast fidelity reports "fe" after a fallback)
+    fidelity_now = "fe"
 
     def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None, backend: str = "auto"):
         from kite_env.polar import nominal_wing

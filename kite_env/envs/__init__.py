@@ -1,9 +1,12 @@
 """Gymnasium environments of kite_env (registered on ``import kite_env``); the physics modules never import gymnasium.
 
-* ``KiteFigureEight-v0``: :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`, the full aeroelastic model.
+* ``KiteFigureEight-v0``: :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`, the full aeroelastic model
+  (``fidelity="surrogate"`` for the reduced-order wing).
+* ``KiteFigureEightFast-v0``: the same environment with the reduced-order wing (``fidelity="surrogate"``).
 """
 
 ENV_ID = "KiteFigureEight-v0"
+FAST_ENV_ID = "KiteFigureEightFast-v0"
 
 
 def register_envs() -> None:
@@ -13,3 +16,6 @@ def register_envs() -> None:
     if ENV_ID not in registry:
         # no TimeLimit wrapper: the env truncates itself at env.max_episode_s (the step count depends on the config)
         register(id=ENV_ID, entry_point="kite_env.envs.figure_eight:KiteFigureEightEnv")
+    if FAST_ENV_ID not in registry:
+        register(id=FAST_ENV_ID, entry_point="kite_env.envs.figure_eight:KiteFigureEightEnv",
+                 kwargs={"fidelity": "surrogate"})

@@ -18,7 +18,7 @@ from gymnasium import spaces
 
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
 from kite_env.control import LineActuator
-from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
+from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord, make_simulator
 from kite_env.flight import GROUND_ELEVATION_RAD
 from kite_env.trajectory import Lemniscate, azimuth, elevation, heading_angle, sphere_basis, wrap_angle
 from kite_env.wind import WindField
@@ -107,20 +107,27 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Arguments
 
-    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None, wing=None)``: ``config`` is
-    a :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
-    ``"section.key=value"`` strings applied on top; ``wing`` an :class:`kite_env.fsi.AeroelasticWing` to reuse. ``render_mode`` is ``"rgb_array"`` (flight path and deformed
-    wing as a uint8 image) or ``"human"`` (the same in a matplotlib window).
+    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None, wing=None, fidelity=None)``:
+    ``config`` is a :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
+    ``"section.key=value"`` strings applied on top; ``wing`` an :class:`kite_env.fsi.AeroelasticWing` to reuse;
+    ``fidelity`` ``"fe"`` (the aeroelastic FE wing) or ``"surrogate"`` (the reduced-order wing fitted to it,
+    :mod:`kite_env.surrogate`; overrides ``sim.fidelity``). ``KiteFigureEightFast-v0`` is this env with
+    ``fidelity="surrogate"``. In the surrogate fidelity a state beyond the sampled envelope ends the episode
+    (``termination_reason`` "outside surrogate envelope", the inputs named in ``info["termination_detail"]``) or,
+    with ``sim.surrogate_fallback``, continues in the FE model (``info["fidelity"]`` says which model flies).
+    ``render_mode`` is ``"rgb_array"`` (flight path and deformed wing as a uint8 image) or ``"human"`` (the same in
+    a matplotlib window); the surrogate fidelity draws the design wing.
 
     ## Version History
 
-    * v0: first version (full aeroelastic fidelity).
+    * v0: first version (full aeroelastic fidelity); the ``fidelity`` argument and ``KiteFigureEightFast-v0``
+      (reduced-order wing) added without changing the full-fidelity dynamics.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
     def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None,
-                 wing=None):
+                 wing=None, fidelity: str | None = None):
         if isinstance(config, Config):
             base = config
         elif isinstance(config, dict):
@@ -130,6 +137,8 @@ class KiteFigureEightEnv(gym.Env):
         else:
             raise ConfigError(f"config must be a Config, a dict or a YAML path, got {type(config).__name__}")
         cfg = config_from_dict(parse_overrides(overrides), base)
+        if fidelity is not None:
+            cfg = config_from_dict({"sim": {"fidelity": fidelity}}, cfg)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.cfg = cfg
@@ -180,7 +189,7 @@ class KiteFigureEightEnv(gym.Env):
             wind_cfg = dataclasses.replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)
             wind = WindField(wind_cfg)
             if self.sim is None:
-                self.sim = FlightSimulator(self.cfg, wind, self._wing)
+                self.sim = make_simulator(self.cfg, wind, self._wing)
                 self._wing = None
             else:
                 self.sim.wind = wind
@@ -224,13 +233,13 @@ class KiteFigureEightEnv(gym.Env):
         cfg = self.cfg
         dl_star = a * cfg.control.delta_l_max_m
         self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
-        reason = None
+        reason = detail = None
         for _ in range(self.n_physics):
             t0 = time.perf_counter()
             try:
                 rec = self.sim.step(self.L_B, self.L_D)
             except SimulationError as exc:
-                reason = exc.reason
+                reason, detail = exc.reason, exc.detail
                 break
             self.rec = rec
             if self.recorder is not None:
@@ -263,7 +272,10 @@ class KiteFigureEightEnv(gym.Env):
         obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
         obs = np.clip(obs, self.observation_space.low, self.observation_space.high)
         info = {**terms, **feats, "delta_l_star_m": ainfo["delta_l_star"], "L_B_m": self.L_B, "L_D_m": self.L_D,
-                "termination_reason": reason if terminated else ("time limit" if truncated else None)}
+                "termination_reason": reason if terminated else ("time limit" if truncated else None),
+                "fidelity": self.sim.fidelity_now}
+        if detail:
+            info["termination_detail"] = detail
         self._trail.append(self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4]))
         if self.render_mode == "human":
             self.render()
