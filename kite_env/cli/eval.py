@@ -96,6 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seed of the first episode: turbulence realisation (wind.seed) and reset seed")
     p.add_argument("--randomize", action="store_true",
                    help="draw wind and start per episode from the env section's ranges (as in training)")
+    p.add_argument("--fidelity", choices=("fe", "surrogate"), default=None,
+                   help="wing model: fe (the aeroelastic FE wing) or surrogate (the reduced-order wing); default: "
+                        "sim.fidelity of the config (for a model: of its training run)")
     p.add_argument("--force", action="store_true", help="replace an existing non-empty --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     return p
@@ -350,6 +353,8 @@ def main(argv=None) -> int:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.seed is not None:
         overrides.append(f"wind.seed={args.seed}")
+    if args.fidelity is not None:
+        overrides.append(f"sim.fidelity={args.fidelity}")
     if args.config is not None and not Path(args.config).is_file():
         return _fail(f"--config file {args.config!r} does not exist")
     specs = list(args.compare) if args.compare else [args.policy]

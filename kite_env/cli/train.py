@@ -24,6 +24,7 @@ from kite_env.config import ConfigError, load_config
 
 ALGOS = ("ppo", "sac")
 ENV_ID = "KiteFigureEight-v0"
+FAST_ENV_ID = "KiteFigureEightFast-v0"  # the same env with sim.fidelity = surrogate (hyperparameters keyed by it)
 #: hyperparameter keys that are not constructor arguments of the algorithm
 _META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs"}
 _DEFAULT_HP = {
@@ -106,8 +107,9 @@ def train(args) -> Path:
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
 
     out = Path(args.out)
-    cfg = load_config(args.env_config, args.set)
-    hp = load_hyperparameters(args.config, args.algo)
+    cfg = load_config(args.env_config, [*args.set, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])])
+    env_id = FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID
+    hp = load_hyperparameters(args.config, args.algo, env_id)
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
     if n_envs < 1:
         raise UsageError(f"--n-envs must be >= 1, got {n_envs}")
@@ -209,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override any project config value (repeatable)")
     p.add_argument("--n-envs", type=int, default=None, help="parallel environments (SubprocVecEnv when > 1)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fidelity", choices=("fe", "surrogate"), default=None,
+                   help="wing model of the training env: fe (the aeroelastic FE wing) or surrogate (reduced-order "
+                        "wing, KiteFigureEightFast-v0); default: sim.fidelity of the config")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT/checkpoints")
     p.add_argument("--force", action="store_true", help="train into a non-empty OUT")
     return p

@@ -472,6 +472,23 @@ class SurrogateKites:
 
 
 # ---------------------------------------------------------------------------------------------------- one kite
+def _default_start_table(cfg, surrogate_path=None):
+    """The start table that belongs to the surrogate (next to its weights or shipped), None if there is none."""
+    from pathlib import Path
+
+    from kite_env.surrogate import default_start_path
+    from kite_env.surrogate.start import StartTable
+
+    if surrogate_path:
+        p = Path(surrogate_path)
+        p = p.with_name(p.stem + "_start.npz")
+        return StartTable.load(p) if p.is_file() else None
+    try:
+        return StartTable.load(default_start_path(cfg.kite.name))
+    except FileNotFoundError:
+        return None
+
+
 _NAN3 = np.full(3, np.nan)
 _ZERO3 = np.zeros(3)
 
@@ -493,14 +510,18 @@ class SurrogateFlightSimulator(FlightSimulator):
     cfg : Config
     wind : WindField
     surrogate : SurrogateWing, optional (default: the shipped model of ``cfg.kite.name``)
+    surrogate_path : path of ``surrogate``'s weights, optional: its start table is ``<stem>_start.npz`` next to it
     wing : AeroelasticWing, optional (geometry, FE start; built from ``cfg.kite`` when not given)
     start : {"table", "fe"}
+    start_table : StartTable, optional (default: the shipped one, or the one next to ``surrogate_path``; without
+        one the start is solved with the FE wing)
     on_outside : {"error", "fe"}
         A state beyond the sampled envelope raises :class:`SimulationError` ("outside surrogate envelope"), or the
         kite continues in the full model from there (``"fe"``, :attr:`fallback_t` says when).
     """
 
-    def __init__(self, cfg, wind, surrogate=None, wing=None, start: str = "table", on_outside: str = "error"):
+    def __init__(self, cfg, wind, surrogate=None, wing=None, start: str = "table", on_outside: str = "error",
+                 start_table=None, surrogate_path=None):
         from kite_env.polar import nominal_wing
 
         if start not in ("table", "fe"):
@@ -514,7 +535,9 @@ class SurrogateFlightSimulator(FlightSimulator):
 
             surrogate = load_default(cfg.kite.name)
         self.surrogate = surrogate
-        self.start_table = getattr(self.surrogate, "start", None)
+        self.start_table = start_table
+        if start_table is None and start == "table":
+            self.start_table = _default_start_table(cfg, surrogate_path)
         self.start_mode = start if self.start_table is not None else "fe"
         self.on_outside = on_outside
         self.dt = cfg.dynamics.dt_s
@@ -589,7 +612,7 @@ class SurrogateFlightSimulator(FlightSimulator):
         fe.state = ParticleState(self.kites.r[0].copy(), self.kites.v[0].copy())
         fe.t = float(self.kites.t[0])
         self.wing.reset()
-        fe._solve_wing(first=True)
+        self._fe_rec = fe._solve_wing(first=True)
         self._fe = fe
         self.fallback_t = fe.t
 
@@ -605,8 +628,8 @@ class SurrogateFlightSimulator(FlightSimulator):
         self.kites.step(L_B, L_D)
         if self.kites.status[0] != OK:
             self._raise_status()
-        if self._fe is not None:  # switched to the full model at this state
-            rec = self._fe._solve_wing()
+        if self._fe is not None:  # switched to the full model at this state: its cold wing solve there
+            rec = self._fe_rec
             rec.tether_force = float(self.kites.tether_force[0])
         else:
             rec = self._record()

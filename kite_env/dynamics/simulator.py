@@ -66,7 +66,7 @@ def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
         from kite_env.surrogate.model import SurrogateWing
 
         sw = SurrogateWing.load(cfg.sim.surrogate_path) if cfg.sim.surrogate_path else None
-        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing,
+        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=cfg.sim.surrogate_path or None,
                                         on_outside="fe" if cfg.sim.surrogate_fallback else "error")
     return FlightSimulator(cfg, wind, wing)
 
