@@ -103,14 +103,17 @@ def make_plots(log: FlightLog, cfg: Config, out_dir: str | Path) -> list[Path]:
     _save(plt, fig, out / "alpha.png", written)
 
     # Fig. 13: tip lift and drag
+    # (the reduced-order wing of the surrogate fidelity returns no section forces: no plot)
     lift, drag = np.asarray(se["section_lift"]), np.asarray(se["section_drag"])
-    fig, axes = _time_axes(plt, 2, "Aerodynamic forces on the wing tip sections (cf. paper Fig. 13)", warmup, t_end)
-    for ax, arr, name in ((axes[0], lift, "lift"), (axes[1], drag, "drag")):
-        ax.plot(ts, arr[k, -1], lw=0.9, label=f"left tip {name}")
-        ax.plot(ts, arr[k, 0], lw=0.9, label=f"right tip {name}")
-        ax.set_ylabel(f"section {name} [N]")
-        ax.legend(loc="upper right", fontsize=8, ncol=3)
-    _save(plt, fig, out / "tip_forces.png", written)
+    if lift.ndim == 2:
+        fig, axes = _time_axes(plt, 2, "Aerodynamic forces on the wing tip sections (cf. paper Fig. 13)", warmup,
+                               t_end)
+        for ax, arr, name in ((axes[0], lift, "lift"), (axes[1], drag, "drag")):
+            ax.plot(ts, arr[k, -1], lw=0.9, label=f"left tip {name}")
+            ax.plot(ts, arr[k, 0], lw=0.9, label=f"right tip {name}")
+            ax.set_ylabel(f"section {name} [N]")
+            ax.legend(loc="upper right", fontsize=8, ncol=3)
+        _save(plt, fig, out / "tip_forces.png", written)
 
     # Fig. 14: line tensions and tether force
     lt = np.asarray(se["line_tension"])

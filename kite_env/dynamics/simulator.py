@@ -67,6 +67,7 @@ def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
 
         sw = SurrogateWing.load(cfg.sim.surrogate_path) if cfg.sim.surrogate_path else None
         return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=cfg.sim.surrogate_path or None,
+                                        start=cfg.sim.surrogate_start,
                                         on_outside="fe" if cfg.sim.surrogate_fallback else "error")
     return FlightSimulator(cfg, wind, wing)
 
