@@ -19,8 +19,9 @@ from gymnasium import spaces
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
 from kite_env.control import LineActuator
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord, make_simulator
+from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.flight import GROUND_ELEVATION_RAD
-from kite_env.trajectory import Lemniscate, azimuth, elevation, heading_angle, sphere_basis, wrap_angle
+from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
 
 #: observation terms: (size, lower bound, upper bound) of each entry
@@ -32,7 +33,27 @@ _TERM_SPECS = {
     "rates": (4, -10.0, 10.0),  # angular velocity on the sphere (x_s, y_s) [rad/s], yaw rate [rad/s], speed / 25 m/s
     "actuator": (3, -5.0, 5.0),  # last action, actual (l_B - l_D) / dl_max, force ratio mu
 }
-V_SCALE_MPS = 25.0
+V_SCALE_MPS = 25.0  # (literal 25.0 in kite_env.envs.observe.observe_kites)
+#: the features of ``info`` (all of :data:`kite_env.envs.observe.FEATURES` but the last, ``tracking``)
+INFO_FEATURES = FEATURES[:-1]
+_ONE = np.ones(1, dtype=np.bool_)
+
+
+def reward_terms(env, tracking, tether_N, a, last_a, failed):
+    """Reward terms of one step (floats, or (n,) arrays for a batch; the same operations in both cases).
+
+    ``env`` : EnvConfig; ``tracking`` exp(-(delta/scale)^2); ``tether_N`` [N]; ``a``, ``last_a`` this and the
+    previous action; ``failed`` a physical failure (bool). Returns the dict of the four ``reward_*`` terms."""
+    d = a - last_a
+    if np.ndim(failed) == 0:
+        return {"reward_tracking": 0.0 if failed else env.w_tracking * tracking,
+                "reward_traction": 0.0 if failed else env.w_traction * tether_N / env.traction_ref_N,
+                "reward_action": -env.w_action_rate * (d * d),
+                "reward_crash": -env.crash_penalty if failed else 0.0}
+    return {"reward_tracking": np.where(failed, 0.0, env.w_tracking * tracking),
+            "reward_traction": np.where(failed, 0.0, env.w_traction * tether_N / env.traction_ref_N),
+            "reward_action": -env.w_action_rate * (d * d),
+            "reward_crash": np.where(failed, -env.crash_penalty, 0.0)}
 
 
 def observation_layout(terms: str | tuple[str, ...]) -> dict[str, slice]:
@@ -46,6 +67,22 @@ def observation_layout(terms: str | tuple[str, ...]) -> dict[str, slice]:
         out[name] = slice(i, i + n)
         i += n
     return out
+
+
+def resolve_config(config: Config | dict | str | None = None, overrides=(), fidelity: str | None = None) -> Config:
+    """The env's configuration from its ``config``, ``overrides`` and ``fidelity`` arguments (class docstring)."""
+    if isinstance(config, Config):
+        base = config
+    elif isinstance(config, dict):
+        base = config_from_dict(config)
+    elif config is None or isinstance(config, (str, os.PathLike)):
+        base = load_config(config)
+    else:
+        raise ConfigError(f"config must be a Config, a dict or a YAML path, got {type(config).__name__}")
+    cfg = config_from_dict(parse_overrides(overrides), base)
+    if fidelity is not None:
+        cfg = config_from_dict({"sim": {"fidelity": fidelity}}, cfg)
+    return cfg
 
 
 class KiteFigureEightEnv(gym.Env):
@@ -128,17 +165,7 @@ class KiteFigureEightEnv(gym.Env):
 
     def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None,
                  wing=None, fidelity: str | None = None):
-        if isinstance(config, Config):
-            base = config
-        elif isinstance(config, dict):
-            base = config_from_dict(config)
-        elif config is None or isinstance(config, (str, os.PathLike)):
-            base = load_config(config)
-        else:
-            raise ConfigError(f"config must be a Config, a dict or a YAML path, got {type(config).__name__}")
-        cfg = config_from_dict(parse_overrides(overrides), base)
-        if fidelity is not None:
-            cfg = config_from_dict({"sim": {"fidelity": fidelity}}, cfg)
+        cfg = resolve_config(config, overrides, fidelity)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.cfg = cfg
@@ -161,6 +188,10 @@ class KiteFigureEightEnv(gym.Env):
         self.rec: StepRecord | None = None
         self._trail: list[np.ndarray] = []
         self._fig = None
+        self._observer = Observer(cfg, self.path, self.layout)
+        self._obs_buf = {"hint": np.zeros(1), "act": np.zeros(1), "tether": np.zeros(1), "t": np.zeros(1),
+                         "parts": np.zeros((1, N_PARTS)), "feats": np.zeros((1, len(FEATURES)))}
+        self._tracking = 0.0
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -252,20 +283,11 @@ class KiteFigureEightEnv(gym.Env):
                 reason = "slack tether"
                 break
         self.steps += 1
+        prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied
         obs, feats = self._observe(self.rec)
         if reason is None and not np.all(np.isfinite(obs)):
             reason = "non-finite state"
-        env = cfg.env
-        terms = {
-            "reward_tracking": env.w_tracking * math.exp(-(feats["path_distance_rad"]
-                                                           / math.radians(env.tracking_scale_deg)) ** 2),
-            "reward_traction": env.w_traction * feats["tether_force_N"] / env.traction_ref_N,
-            "reward_action": -env.w_action_rate * (a - self.last_action) ** 2,
-            "reward_crash": -env.crash_penalty if reason is not None else 0.0,
-        }
-        if reason is not None:
-            terms["reward_tracking"] = terms["reward_traction"] = 0.0
-        self.last_action = a
+        terms = reward_terms(cfg.env, self._tracking, feats["tether_force_N"], a, prev_action, reason is not None)
         reward = float(sum(terms.values()))
         terminated = reason is not None
         truncated = (not terminated) and self.steps >= self.max_steps
@@ -283,42 +305,22 @@ class KiteFigureEightEnv(gym.Env):
 
     # ------------------------------------------------------------------ observation
     def _observe(self, rec: StepRecord):
-        cfg = self.cfg
-        r_kcu = rec.state.r[4]
-        R = r_kcu / np.linalg.norm(r_kcu)
-        nose = -rec.R_wk[:, 0]
-        psi = float(heading_angle(R, nose))
-        near = self.path.nearest(R, self.s_hint)
-        self.s_hint = near.s
-        left = np.cross(near.point, near.e_t)
-        signed = -near.distance_rad * math.copysign(1.0, float(near.e_n @ left))
-        psi_t = float(heading_angle(near.point, near.e_t))
-        dpsi = float(wrap_angle(psi_t - psi))
-        x_s, y_s = sphere_basis(R)
-        v_kcu = rec.state.v[4]
-        w_s = (v_kcu - (v_kcu @ R) * R) / cfg.dynamics.tether_length_m
-        yaw_rate = float(rec.R_wk[:, 2] @ rec.omega)
-        speed = float(np.linalg.norm(rec.v_kite))
-        mu = LineActuator.force_ratio(rec.line_tension)
-        dl = float(rec.line_length[1] - rec.line_length[3])
-        fs = cfg.env.force_scale_N
-        # the record of a reset has no tether constraint force yet: the bridle lines' sum stands in for it
-        tether = float(rec.tether_force) if math.isfinite(rec.tether_force) else float(np.sum(rec.line_tension))
-        parts = {
-            "position": R,
-            "heading": (math.sin(psi), math.cos(psi)),
-            "line_forces": np.append(rec.line_tension, tether) / fs,
-            "path": (signed, math.sin(dpsi), math.cos(dpsi), math.sin(near.s), math.cos(near.s)),
-            "rates": (float(w_s @ x_s), float(w_s @ y_s), yaw_rate, speed / V_SCALE_MPS),
-            "actuator": (self.last_action, dl / cfg.control.delta_l_max_m, mu),
-        }
-        obs = np.concatenate([np.asarray(parts[t], dtype=np.float64).ravel() for t in self.layout]).astype(np.float32)
-        feats = {"t": float(rec.t), "path_distance_rad": float(near.distance_rad),
-                 "path_distance_deg": math.degrees(near.distance_rad), "path_s": float(near.s),
-                 "tether_force_N": tether, "speed_mps": speed, "heading_rad": psi,
-                 "yaw_rate_rad_s": yaw_rate, "force_ratio_mu": mu, "delta_l_m": dl,
-                 "elevation_deg": math.degrees(float(elevation(R))), "azimuth_deg": math.degrees(float(azimuth(R)))}
-        return obs, feats
+        """Observation (float32, unclipped) and features of the record ``rec`` (:mod:`kite_env.envs.observe`);
+        advances the nearest-point hint ``s_hint``. The features include ``tracking`` = exp(-(delta/scale)^2)."""
+        buf = self._obs_buf
+        buf["hint"][0] = self.s_hint
+        buf["act"][0] = self.last_action
+        buf["tether"][0] = rec.tether_force
+        buf["t"][0] = rec.t
+        parts, feats = buf["parts"], buf["feats"]
+        self._observer(_ONE, rec.state.r[4:5], rec.state.v[4:5], rec.R_wk[None], rec.omega[None], rec.v_kite[None],
+                       rec.line_tension[None], rec.line_length[None], buf["tether"], buf["t"], buf["hint"],
+                       buf["act"], parts, feats)
+        self.s_hint = float(buf["hint"][0])
+        obs = parts[0, self._observer.index].astype(np.float32)
+        vals = feats[0].tolist()
+        self._tracking = vals[-1]
+        return obs, dict(zip(INFO_FEATURES, vals))
 
     # ------------------------------------------------------------------ rendering
     def render(self):
