@@ -14,7 +14,8 @@
    ``kite_env/surrogate/data/``.
 
 ``--quick`` runs a tiny version of every stage (a check of the pipeline, not a usable model; never installed).
-Exit status 1 when no size meets the requirement (bridle-force RMS error below 3 % of the mean traction).
+Exit status 1 when no size meets the requirement (bridle-force RMS error below 3 % of the mean traction;
+not checked with ``--quick``).
 """
 
 from __future__ import annotations
@@ -162,12 +163,14 @@ def main(argv=None) -> int:
     print(f"shipped: hidden {chosen} ({reason}) -> {pkg}")
     for f in sorted(pkg.iterdir()):
         print(f"  {f.name}: {f.stat().st_size / 1024:.1f} KiB")
-    json.dump({"chosen": chosen, "errors": errs, "walls": walls, "command": command,
-               "start_failed": table.meta["failed"]}, open(out / "build_summary.json", "w"), indent=1)
+    with open(out / "build_summary.json", "w") as f:
+        json.dump({"chosen": chosen, "errors": errs, "walls": walls, "command": command,
+                   "start_failed": table.meta["failed"]}, f, indent=1)
     if errs[chosen]["force_rms_rel_traction"] >= REQUIRED_REL:
         print(f"build_surrogate: the bridle-force error {100 * errs[chosen]['force_rms_rel_traction']:.2f} % is not "
-              f"below the required {100 * REQUIRED_REL:g} %; nothing installed", file=sys.stderr)
-        return 1
+              f"below the required {100 * REQUIRED_REL:g} %; nothing installed"
+              + (" (expected of --quick)" if args.quick else ""), file=sys.stderr)
+        return 0 if args.quick else 1
     if args.install:
         data = ROOT / "kite_env" / "surrogate" / "data"
         data.mkdir(exist_ok=True)
