@@ -55,6 +55,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kite_env.config import FIDELITIES
+
 PROG = "kite-eval"
 
 
@@ -96,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seed of the first episode: turbulence realisation (wind.seed) and reset seed")
     p.add_argument("--randomize", action="store_true",
                    help="draw wind and start per episode from the env section's ranges (as in training)")
-    p.add_argument("--fidelity", choices=("fe", "surrogate"), default=None,
+    p.add_argument("--fidelity", choices=FIDELITIES, default=None,
                    help="wing model: fe (the aeroelastic FE wing) or surrogate (the reduced-order wing); default: "
                         "sim.fidelity of the config (for a model: of its training run)")
     p.add_argument("--force", action="store_true", help="replace an existing non-empty --out")

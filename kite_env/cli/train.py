@@ -20,7 +20,7 @@ from pathlib import Path
 
 import yaml
 
-from kite_env.config import ConfigError, load_config
+from kite_env.config import FIDELITIES, ConfigError, load_config
 
 ALGOS = ("ppo", "sac")
 ENV_ID = "KiteFigureEight-v0"
@@ -211,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override any project config value (repeatable)")
     p.add_argument("--n-envs", type=int, default=None, help="parallel environments (SubprocVecEnv when > 1)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--fidelity", choices=("fe", "surrogate"), default=None,
+    p.add_argument("--fidelity", choices=FIDELITIES, default=None,
                    help="wing model of the training env: fe (the aeroelastic FE wing) or surrogate (reduced-order "
                         "wing, KiteFigureEightFast-v0); default: sim.fidelity of the config")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT/checkpoints")

@@ -11,11 +11,11 @@ drag, tip-pair dashpots, tether and tip constraints, projection after the step);
   bridle points, their rates, the apparent velocity and the rotation rate in K, evaluated at *every* RK4 stage
   (it is cheap; the stiffness correction of the full model is then implicit in the stage evaluations).
 
-Per stage three calls, each over all kites: a compiled kernel for the wing inputs (frame K and its rates,
-:func:`kite_env.frames.kite_frame_rates`, and the wind at the five masses and at the frame origin), the MLP as
-three dense matrix products (NumPy/BLAS over the ``n`` rows), and the compiled particle right-hand side. A single
-kite is the case ``n = 1`` of the same code (:class:`SurrogateFlightSimulator`), so that one kite and a batch give
-the same trajectory for the same inputs.
+One compiled call (:func:`step_kites`) advances all kites; per kite and stage it evaluates the wing inputs (frame K
+and its rates as :func:`kite_env.frames.kite_frame_rates`, the wind at the five masses and at the frame origin), the
+MLP one row at a time (:func:`mlp_row`) and the particle right-hand side. A single kite is the case ``n = 1`` of the
+same code (:class:`SurrogateFlightSimulator`), so that one kite and a batch give the same trajectory for the same
+inputs.
 
 The wing outputs at the end of a step (the states the flight visits) are also the first stage of the next step; they
 are checked against the sampled envelope (:meth:`SurrogateWing.outside`, ``status`` ``OUTSIDE``).
@@ -284,7 +284,9 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     ws = np.empty((5, 3))
     Rs = np.empty((3, 3))
     rs = np.empty((5, 3))
-    vs = np.empty((5, 3))
+    vn = np.empty((5, 3))
+    kv = np.empty((4, 5, 3))  # RK4 stage velocities (k_iv) and accelerations (k_ia)
+    ka = np.empty((4, 5, 3))
     half = 0.5 * dt
     for k in range(r.shape[0]):
         if not active[k]:
@@ -294,54 +296,35 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                                  line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k],
                                  gravity, alpha)
         tether[k] = -lam[0] * tether_length
-        # stage 2 at t + dt/2: r0 + dt/2 k1v, v0 + dt/2 k1a
-        for i in range(5):
-            for c in range(3):
-                rs[i, c] = r0[i, c] + half * v0[i, c]
-                vs[i, c] = v0[i, c] + half * a1[i, c]
-        v2 = vs.copy()
-        kite_inputs(t[k] + half, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
-                    amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf)
-        mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, ys)
-        a2, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                               line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity,
-                               alpha)
-        # stage 3 at t + dt/2: r0 + dt/2 k2v, v0 + dt/2 k2a
-        for i in range(5):
-            for c in range(3):
-                rs[i, c] = r0[i, c] + half * v2[i, c]
-                vs[i, c] = v0[i, c] + half * a2[i, c]
-        v3 = vs.copy()
-        kite_inputs(t[k] + half, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
-                    amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf)
-        mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, ys)
-        a3, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                               line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity,
-                               alpha)
-        # stage 4 at t + dt: r0 + dt k3v, v0 + dt k3a
-        for i in range(5):
-            for c in range(3):
-                rs[i, c] = r0[i, c] + dt * v3[i, c]
-                vs[i, c] = v0[i, c] + dt * a3[i, c]
-        v4 = vs.copy()
-        kite_inputs(t[k] + dt, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
-                    amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf)
-        mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, ys)
-        a4, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                               line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity,
-                               alpha)
+        kv[0] = v0
+        ka[0] = a1
+        for st in range(1, 4):
+            # stages 2, 3 at t + dt/2 from (kv, ka) of the stage before; stage 4 at t + dt
+            h = half if st < 3 else dt
+            for i in range(5):
+                for c in range(3):
+                    rs[i, c] = r0[i, c] + h * kv[st - 1, i, c]
+                    kv[st, i, c] = v0[i, c] + h * ka[st - 1, i, c]
+            vs = kv[st]
+            kite_inputs(t[k] + h, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
+                        amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf)
+            mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, ys)
+            a_st, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
+                                     line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k],
+                                     gravity, alpha)
+            ka[st] = a_st
         ok = True
         for i in range(5):
             for c in range(3):
-                rs[i, c] = r0[i, c] + dt / 6.0 * (v0[i, c] + 2.0 * v2[i, c] + 2.0 * v3[i, c] + v4[i, c])
-                vs[i, c] = v0[i, c] + dt / 6.0 * (a1[i, c] + 2.0 * a2[i, c] + 2.0 * a3[i, c] + a4[i, c])
-                if not (math.isfinite(rs[i, c]) and math.isfinite(vs[i, c])):
+                rs[i, c] = r0[i, c] + dt / 6.0 * (kv[0, i, c] + 2.0 * kv[1, i, c] + 2.0 * kv[2, i, c] + kv[3, i, c])
+                vn[i, c] = v0[i, c] + dt / 6.0 * (ka[0, i, c] + 2.0 * ka[1, i, c] + 2.0 * ka[2, i, c] + ka[3, i, c])
+                if not (math.isfinite(rs[i, c]) and math.isfinite(vn[i, c])):
                     ok = False
         t[k] = t[k] + dt
         if ok:
-            rp, vp = project_constraints(rs, vs, m, tether_length, tip_lengths, 3)
+            rp, vp = project_constraints(rs, vn, m, tether_length, tip_lengths, 3)
         else:
-            rp, vp = rs, vs
+            rp, vp = rs, vn
         for i in range(5):
             for c in range(3):
                 r[k, i, c] = rp[i, c]

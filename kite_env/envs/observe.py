@@ -164,8 +164,8 @@ def nearest_point(R0, R1, R2, s_hint, samples, s_samples, window, ds, a, b, rot,
 
 
 @njit(**_JIT)
-def _heading(r0, r1, r2, v0, v1, v2):
-    """:func:`kite_env.trajectory.heading_angle` of one vector (scalar branch)."""
+def _sphere_basis(r0, r1, r2):
+    """:func:`kite_env.trajectory.sphere_basis` at ``r / |r|`` for one vector: ``x_s`` then ``y_s``."""
     n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     r0, r1, r2 = r0 / n, r1 / n, r2 / n
     h = math.hypot(r0, r1)
@@ -174,7 +174,13 @@ def _heading(r0, r1, r2, v0, v1, v2):
     else:
         cp, sp = 1.0, 0.0
     xs0, xs1, xs2 = -r2 * cp, -r2 * sp, h
-    ys0, ys1, ys2 = r1 * xs2 - r2 * xs1, r2 * xs0 - r0 * xs2, r0 * xs1 - r1 * xs0
+    return xs0, xs1, xs2, r1 * xs2 - r2 * xs1, r2 * xs0 - r0 * xs2, r0 * xs1 - r1 * xs0
+
+
+@njit(**_JIT)
+def _heading(r0, r1, r2, v0, v1, v2):
+    """:func:`kite_env.trajectory.heading_angle` of one vector (scalar branch)."""
+    xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(r0, r1, r2)
     psi = math.atan2(v0 * ys0 + v1 * ys1 + v2 * ys2, v0 * xs0 + v1 * xs1 + v2 * xs2)
     return _PI if psi <= -_PI else psi
 
@@ -224,16 +230,7 @@ def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, te
         signed = -dist * math.copysign(1.0, n0 * l0 + n1 * l1 + n2 * l2)
         psi_t = _heading(p0, p1, p2, t0, t1, t2)
         dpsi = _wrap(psi_t - psi)
-        # sphere_basis(R) (with its own re-normalisation)
-        nn = math.sqrt(R0 * R0 + R1 * R1 + R2 * R2)
-        u0, u1, u2 = R0 / nn, R1 / nn, R2 / nn
-        h = math.hypot(u0, u1)
-        if h > 0.0:
-            cp, sp = u0 / h, u1 / h
-        else:
-            cp, sp = 1.0, 0.0
-        xs0, xs1, xs2 = -u2 * cp, -u2 * sp, h
-        ys0, ys1, ys2 = u1 * xs2 - u2 * xs1, u2 * xs0 - u0 * xs2, u0 * xs1 - u1 * xs0
+        xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(R0, R1, R2)  # with its own re-normalisation, as sphere_basis
         vr = v_kcu[k, 0] * R0 + v_kcu[k, 1] * R1 + v_kcu[k, 2] * R2
         w0 = (v_kcu[k, 0] - vr * R0) / tether_length
         w1 = (v_kcu[k, 1] - vr * R1) / tether_length
