@@ -125,7 +125,8 @@ class SimConfig:
     fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
     surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name
     surrogate_fallback: bool = False  # surrogate: a state outside the sampled envelope continues in the FE model
-    surrogate_start: str = "table"  # surrogate: the start from the start table (fitted to FE starts) | fe (solved)
+    surrogate_start: str = "table"  # surrogate: the start from the start table (fitted to FE starts), else solved |
+    #   fe (solved) | table_only (a start the table lacks fails, so that the env redraws it: training)
 
 
 #: wing models of the flight simulation (sim.fidelity)
@@ -294,8 +295,9 @@ def _validate(cfg: Config) -> None:
                           f"got {cfg.aero.cm_regression_ref_over_c}")
     if cfg.sim.fidelity not in FIDELITIES:
         raise ConfigError(f"config key 'sim.fidelity' must be one of {', '.join(FIDELITIES)}, got {cfg.sim.fidelity!r}")
-    if cfg.sim.surrogate_start not in ("table", "fe"):
-        raise ConfigError(f"config key 'sim.surrogate_start' must be 'table' or 'fe', got {cfg.sim.surrogate_start!r}")
+    if cfg.sim.surrogate_start not in ("table", "fe", "table_only"):
+        raise ConfigError("config key 'sim.surrogate_start' must be 'table', 'fe' or 'table_only', got "
+                          f"{cfg.sim.surrogate_start!r}")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

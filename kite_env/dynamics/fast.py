@@ -44,17 +44,21 @@ _TWO_PI = 2.0 * math.pi
 
 # ---------------------------------------------------------------------------------------------------- kernels
 @njit(**_JIT)
-def _wind_at(t, pos, out, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T, turbulent,
-             wavevec_t, phase0, omega, amp, n_modes, t_buf):
-    """Wind (P, 3) at ``pos`` (P, 3) for one kite: :meth:`kite_env.wind.WindField.velocity` (numba backend)."""
-    if turbulent:
-        t_buf[0] = t
-        _turbulence_kernel(t_buf, pos, wavevec_t, phase0, omega, amp, n_modes, out)
-    else:
-        for i in range(pos.shape[0]):
-            out[i, 0] = 0.0
-            out[i, 1] = 0.0
-            out[i, 2] = 0.0
+def _wind_parts(t, pos, out, turb, hold, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T,
+                turbulent, wavevec_t, phase0, omega, amp, n_modes, t_buf):
+    """Wind ``out`` (P, 3) at ``pos`` (P, 3) for one kite: the turbulent part ``turb`` (P, 3), evaluated here at
+    ``(t, pos)`` (``hold`` False) or the one passed in (``hold`` True: held from the start of the RK4 step), plus
+    the mean profile and the gust at ``(t, pos)``. With ``hold`` False this is
+    :meth:`kite_env.wind.WindField.velocity` (numba backend)."""
+    if not hold:
+        if turbulent:
+            t_buf[0] = t
+            _turbulence_kernel(t_buf, pos, wavevec_t, phase0, omega, amp, n_modes, turb)
+        else:
+            for i in range(pos.shape[0]):
+                turb[i, 0] = 0.0
+                turb[i, 1] = 0.0
+                turb[i, 2] = 0.0
     g = 0.0
     if gust_G != 0.0:
         tau = (t - gust_t0) / gust_T
@@ -69,149 +73,209 @@ def _wind_at(t, pos, out, speed, profile, z_ref, z0, log_den, shear, gust_G, gus
         else:
             z = max(pos[i, 2], 0.0)
             u = speed * (z / z_ref) ** shear + g
-        out[i, 0] += u
+        out[i, 0] = turb[i, 0] + u
+        out[i, 1] = turb[i, 1]
+        out[i, 2] = turb[i, 2]
+
+
+@njit(**_JIT)
+def _wind_at(t, pos, out, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T, turbulent,
+             wavevec_t, phase0, omega, amp, n_modes, t_buf):
+    """Wind (P, 3) at ``pos`` (P, 3) for one kite: :meth:`kite_env.wind.WindField.velocity` (numba backend)."""
+    turb = np.empty_like(out)
+    _wind_parts(t, pos, out, turb, False, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T,
+                turbulent, wavevec_t, phase0, omega, amp, n_modes, t_buf)
 
 
 @njit(**_JIT)
 def kite_inputs(t, rk, vk, q_design, wf, wi, wavevec_t, phase0, omega_m, amp, n_modes, x, wind5, R, pos, w6,
-                t_buf):
+                t_buf, turb6, hold):
     """Wing inputs ``x`` (30,) of one kite (:data:`kite_env.surrogate.samples.INPUT_NAMES`), the wind ``wind5`` (5, 3)
     at its masses and its frame K ``R`` (3, 3) (columns x_k, y_k, z_k in W) at time ``t`` [s].
 
     ``rk``, ``vk`` (5, 3): A, B, C, D, KCU in W. ``wf`` (9,): wind speed, z_ref, z0, log(z_ref/z0), shear exponent,
     gust amplitude, start, duration, unused; ``wi`` (2,): profile code (uniform 0, log 1, power 2), turbulent (0/1);
-    ``wavevec_t, phase0, omega_m, amp``: the turbulence modes of :class:`kite_env.wind.WindField`. ``pos``, ``w6``
-    (6, 3) and ``t_buf`` (1,) are work arrays.
+    ``wavevec_t, phase0, omega_m, amp``: the turbulence modes of :class:`kite_env.wind.WindField`. ``turb6`` (6, 3):
+    the turbulent wind at the five masses and the frame origin, evaluated and stored here (``hold`` False) or held
+    (``hold`` True, :func:`_wind_parts`). ``pos``, ``w6`` (6, 3) and ``t_buf`` (1,) are work arrays. Scalar code:
+    no allocation (this runs four times per kite and RK4 step).
     """
     # ---- frame K (frames.kite_frame) and its rates (frames.kite_frame_rates)
-    o = np.empty(3)
-    ey = np.empty(3)
-    mm = np.empty(3)
-    vo = np.empty(3)
-    dd = np.empty(3)
-    dm = np.empty(3)
-    for j in range(3):
-        o[j] = 0.5 * (rk[0, j] + rk[2, j])
-        ey[j] = rk[0, j] - rk[2, j]
-        dd[j] = vk[0, j] - vk[2, j]
-        vo[j] = 0.5 * (vk[0, j] + vk[2, j])
-        mm[j] = 0.5 * (rk[1, j] + rk[3, j]) - o[j]
-        dm[j] = 0.5 * (vk[1, j] + vk[3, j]) - vo[j]
-    ld = math.sqrt(ey[0] ** 2 + ey[1] ** 2 + ey[2] ** 2)
-    for j in range(3):
-        ey[j] /= ld
-    s = mm[0] * ey[0] + mm[1] * ey[1] + mm[2] * ey[2]
-    xp = np.empty(3)
-    for j in range(3):
-        xp[j] = mm[j] - s * ey[j]
-    lx = math.sqrt(xp[0] ** 2 + xp[1] ** 2 + xp[2] ** 2)
-    ex = xp / lx
-    ez = np.array([ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]])
-    p = ey[0] * dd[0] + ey[1] * dd[1] + ey[2] * dd[2]
-    dey = (dd - ey * p) / ld
-    mdey = mm[0] * dey[0] + mm[1] * dey[1] + mm[2] * dey[2]
-    dmey = dm[0] * ey[0] + dm[1] * ey[1] + dm[2] * ey[2]
-    dxp = dm - (dmey + mdey) * ey - s * dey
-    q = ex[0] * dxp[0] + ex[1] * dxp[1] + ex[2] * dxp[2]
-    dex = (dxp - ex * q) / lx
-    dez = np.array([dex[1] * ey[2] - dex[2] * ey[1], dex[2] * ey[0] - dex[0] * ey[2],
-                    dex[0] * ey[1] - dex[1] * ey[0]])
-    dez += np.array([ex[1] * dey[2] - ex[2] * dey[1], ex[2] * dey[0] - ex[0] * dey[2],
-                     ex[0] * dey[1] - ex[1] * dey[0]])
-    w = np.zeros(3)  # omega = 1/2 sum_i e_i x de_i/dt
-    for e, de in ((ex, dex), (ey, dey), (ez, dez)):
-        w[0] += 0.5 * (e[1] * de[2] - e[2] * de[1])
-        w[1] += 0.5 * (e[2] * de[0] - e[0] * de[2])
-        w[2] += 0.5 * (e[0] * de[1] - e[1] * de[0])
-    for j in range(3):
-        R[j, 0] = ex[j]
-        R[j, 1] = ey[j]
-        R[j, 2] = ez[j]
+    o0 = 0.5 * (rk[0, 0] + rk[2, 0])
+    o1 = 0.5 * (rk[0, 1] + rk[2, 1])
+    o2 = 0.5 * (rk[0, 2] + rk[2, 2])
+    vo0 = 0.5 * (vk[0, 0] + vk[2, 0])
+    vo1 = 0.5 * (vk[0, 1] + vk[2, 1])
+    vo2 = 0.5 * (vk[0, 2] + vk[2, 2])
+    ey0 = rk[0, 0] - rk[2, 0]
+    ey1 = rk[0, 1] - rk[2, 1]
+    ey2 = rk[0, 2] - rk[2, 2]
+    dd0 = vk[0, 0] - vk[2, 0]
+    dd1 = vk[0, 1] - vk[2, 1]
+    dd2 = vk[0, 2] - vk[2, 2]
+    mm0 = 0.5 * (rk[1, 0] + rk[3, 0]) - o0
+    mm1 = 0.5 * (rk[1, 1] + rk[3, 1]) - o1
+    mm2 = 0.5 * (rk[1, 2] + rk[3, 2]) - o2
+    dm0 = 0.5 * (vk[1, 0] + vk[3, 0]) - vo0
+    dm1 = 0.5 * (vk[1, 1] + vk[3, 1]) - vo1
+    dm2 = 0.5 * (vk[1, 2] + vk[3, 2]) - vo2
+    ld = math.sqrt(ey0 ** 2 + ey1 ** 2 + ey2 ** 2)
+    ey0 /= ld
+    ey1 /= ld
+    ey2 /= ld
+    s = mm0 * ey0 + mm1 * ey1 + mm2 * ey2
+    xp0 = mm0 - s * ey0
+    xp1 = mm1 - s * ey1
+    xp2 = mm2 - s * ey2
+    lx = math.sqrt(xp0 ** 2 + xp1 ** 2 + xp2 ** 2)
+    ex0 = xp0 / lx
+    ex1 = xp1 / lx
+    ex2 = xp2 / lx
+    ez0 = ex1 * ey2 - ex2 * ey1
+    ez1 = ex2 * ey0 - ex0 * ey2
+    ez2 = ex0 * ey1 - ex1 * ey0
+    p = ey0 * dd0 + ey1 * dd1 + ey2 * dd2
+    dey0 = (dd0 - ey0 * p) / ld
+    dey1 = (dd1 - ey1 * p) / ld
+    dey2 = (dd2 - ey2 * p) / ld
+    mdey = mm0 * dey0 + mm1 * dey1 + mm2 * dey2
+    dmey = dm0 * ey0 + dm1 * ey1 + dm2 * ey2
+    dxp0 = dm0 - (dmey + mdey) * ey0 - s * dey0
+    dxp1 = dm1 - (dmey + mdey) * ey1 - s * dey1
+    dxp2 = dm2 - (dmey + mdey) * ey2 - s * dey2
+    q = ex0 * dxp0 + ex1 * dxp1 + ex2 * dxp2
+    dex0 = (dxp0 - ex0 * q) / lx
+    dex1 = (dxp1 - ex1 * q) / lx
+    dex2 = (dxp2 - ex2 * q) / lx
+    dez0 = (dex1 * ey2 - dex2 * ey1) + (ex1 * dey2 - ex2 * dey1)
+    dez1 = (dex2 * ey0 - dex0 * ey2) + (ex2 * dey0 - ex0 * dey2)
+    dez2 = (dex0 * ey1 - dex1 * ey0) + (ex0 * dey1 - ex1 * dey0)
+    # omega = 1/2 sum_i e_i x de_i/dt (summed over x, y, z in that order)
+    w0 = 0.5 * (ex1 * dex2 - ex2 * dex1)
+    w1 = 0.5 * (ex2 * dex0 - ex0 * dex2)
+    w2 = 0.5 * (ex0 * dex1 - ex1 * dex0)
+    w0 += 0.5 * (ey1 * dey2 - ey2 * dey1)
+    w1 += 0.5 * (ey2 * dey0 - ey0 * dey2)
+    w2 += 0.5 * (ey0 * dey1 - ey1 * dey0)
+    w0 += 0.5 * (ez1 * dez2 - ez2 * dez1)
+    w1 += 0.5 * (ez2 * dez0 - ez0 * dez2)
+    w2 += 0.5 * (ez0 * dez1 - ez1 * dez0)
+    R[0, 0], R[1, 0], R[2, 0] = ex0, ex1, ex2
+    R[0, 1], R[1, 1], R[2, 1] = ey0, ey1, ey2
+    R[0, 2], R[1, 2], R[2, 2] = ez0, ez1, ez2
     # ---- wind at the five masses and at the frame origin
     for i in range(5):
         for j in range(3):
             pos[i, j] = rk[i, j]
-    for j in range(3):
-        pos[5, j] = o[j]
-    _wind_at(t, pos, w6, wf[0], wi[0], wf[1], wf[2], wf[3], wf[4], wf[5], wf[6], wf[7], wi[1] != 0, wavevec_t,
-             phase0, omega_m, amp, n_modes, t_buf)
+    pos[5, 0], pos[5, 1], pos[5, 2] = o0, o1, o2
+    _wind_parts(t, pos, w6, turb6, hold, wf[0], wi[0], wf[1], wf[2], wf[3], wf[4], wf[5], wf[6], wf[7], wi[1] != 0,
+                wavevec_t, phase0, omega_m, amp, n_modes, t_buf)
     for i in range(5):
         for j in range(3):
             wind5[i, j] = w6[i, j]
     # ---- inputs (samples.features): q_b - q_design, qdot_b (relative to K), v_app, omega, all in K
-    wK = np.empty(3)
-    for c in range(3):
-        wK[c] = w[0] * R[0, c] + w[1] * R[1, c] + w[2] * R[2, c]
-    qb = np.empty(3)
-    vb = np.empty(3)
+    wK0 = w0 * R[0, 0] + w1 * R[1, 0] + w2 * R[2, 0]
+    wK1 = w0 * R[0, 1] + w1 * R[1, 1] + w2 * R[2, 1]
+    wK2 = w0 * R[0, 2] + w1 * R[1, 2] + w2 * R[2, 2]
     for i in range(4):
-        for c in range(3):
-            qb[c] = (rk[i, 0] - o[0]) * R[0, c] + (rk[i, 1] - o[1]) * R[1, c] + (rk[i, 2] - o[2]) * R[2, c]
-            vb[c] = (vk[i, 0] - vo[0]) * R[0, c] + (vk[i, 1] - vo[1]) * R[1, c] + (vk[i, 2] - vo[2]) * R[2, c]
-        x[3 * i + 0] = qb[0] - q_design[i, 0]
-        x[3 * i + 1] = qb[1] - q_design[i, 1]
-        x[3 * i + 2] = qb[2] - q_design[i, 2]
-        x[12 + 3 * i + 0] = vb[0] - (wK[1] * qb[2] - wK[2] * qb[1])
-        x[12 + 3 * i + 1] = vb[1] - (wK[2] * qb[0] - wK[0] * qb[2])
-        x[12 + 3 * i + 2] = vb[2] - (wK[0] * qb[1] - wK[1] * qb[0])
+        a0, a1, a2 = rk[i, 0] - o0, rk[i, 1] - o1, rk[i, 2] - o2
+        b0, b1, b2 = vk[i, 0] - vo0, vk[i, 1] - vo1, vk[i, 2] - vo2
+        qb0 = a0 * R[0, 0] + a1 * R[1, 0] + a2 * R[2, 0]
+        qb1 = a0 * R[0, 1] + a1 * R[1, 1] + a2 * R[2, 1]
+        qb2 = a0 * R[0, 2] + a1 * R[1, 2] + a2 * R[2, 2]
+        vb0 = b0 * R[0, 0] + b1 * R[1, 0] + b2 * R[2, 0]
+        vb1 = b0 * R[0, 1] + b1 * R[1, 1] + b2 * R[2, 1]
+        vb2 = b0 * R[0, 2] + b1 * R[1, 2] + b2 * R[2, 2]
+        x[3 * i + 0] = qb0 - q_design[i, 0]
+        x[3 * i + 1] = qb1 - q_design[i, 1]
+        x[3 * i + 2] = qb2 - q_design[i, 2]
+        x[12 + 3 * i + 0] = vb0 - (wK1 * qb2 - wK2 * qb1)
+        x[12 + 3 * i + 1] = vb1 - (wK2 * qb0 - wK0 * qb2)
+        x[12 + 3 * i + 2] = vb2 - (wK0 * qb1 - wK1 * qb0)
+    a0, a1, a2 = vo0 - w6[5, 0], vo1 - w6[5, 1], vo2 - w6[5, 2]
     for c in range(3):
-        x[24 + c] = ((vo[0] - w6[5, 0]) * R[0, c] + (vo[1] - w6[5, 1]) * R[1, c] + (vo[2] - w6[5, 2]) * R[2, c])
-        x[27 + c] = wK[c]
+        x[24 + c] = a0 * R[0, c] + a1 * R[1, c] + a2 * R[2, c]
+    x[27], x[28], x[29] = wK0, wK1, wK2
+
+
+# rational approximation of tanh: tanh(x) ~ x P(u) / Q(u), u = (x / 12)^2, for |x| <= 12 (|x| > 12: x clamped,
+# 1 - tanh(12) = 7.6e-11). Coefficients: linearised least squares (Loeb's iteration, 40 rounds) of tanh(x)/x on
+# 6,000 Chebyshev points of [0, 12], degree 7 over 7 in u; max |error| 2.1e-10 on the real line
+# (tests/dynamics/test_fast.py). Unlike libm's exp, polynomials and a division vectorise over the 64 units.
+_TANH_CLAMP = 12.0
+_TANH_INV_C2 = 1.0 / 144.0
+_TANH_P = (0.9999999999944414, 19.155017387139473, 69.06014265160871, 32.81729030979992, -43.28042736931411,
+           20.92567139802267, 24.84618491093609, 1.272300621347853)
+_TANH_Q = (1.0, 67.15501736545255, 527.7009840099352, 840.6143015971842, -241.39535975836614,
+           -227.91246578802185, 438.6164396440909, 103.77524164025381)
 
 
 @njit(**_JIT)
-def _tanh(x):
-    """tanh from one exponential, ``sign(x) (1 - e) / (1 + e)`` with ``e = exp(-2|x|)`` (agrees with ``math.tanh``
-    to ~2e-16; 2.5x faster here than libm's tanh)."""
-    e = math.exp(-2.0 * abs(x))
-    return math.copysign((1.0 - e) / (1.0 + e), x)
+def tanh_inplace(h):
+    """``h <- tanh(h)`` elementwise (rational approximation above; NaN stays NaN)."""
+    P0, P1, P2, P3, P4, P5, P6, P7 = _TANH_P
+    Q0, Q1, Q2, Q3, Q4, Q5, Q6, Q7 = _TANH_Q
+    for j in range(h.shape[0]):
+        x = h[j]
+        if x > _TANH_CLAMP:
+            x = _TANH_CLAMP
+        elif x < -_TANH_CLAMP:
+            x = -_TANH_CLAMP
+        u = x * x * _TANH_INV_C2
+        p = ((((((P7 * u + P6) * u + P5) * u + P4) * u + P3) * u + P2) * u + P1) * u + P0
+        q = ((((((Q7 * u + Q6) * u + Q5) * u + Q4) * u + Q3) * u + Q2) * u + Q1) * u + Q0
+        h[j] = x * p / q
 
 
 @njit(**_JIT)
-def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, y):
-    """``y = tanh(tanh(x W0 + b0) W1 + b1) W2 + b2`` for one row (normalisations folded into the weights)."""
+def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
+    """``y = tanh(tanh(x W0 + b0) W1 + b1) W2 + b2`` for one row ``x`` (30,) float64 -> ``y`` (17,) float64, in
+    float32 (the weights are stored and trained in float32; the normalisations are folded into the first and last
+    layers; tanh from :func:`tanh_inplace`). ``h0``, ``h1``, ``h2``: float32 work arrays of the layer widths. The
+    weights of the 64-wide model fill 28 kB in float32, which stays in the L1 cache; in float64 they do not."""
     n0, n1, n2 = W0.shape[1], W1.shape[1], W2.shape[1]
     for j in range(n0):
         h0[j] = b0[j]
     for i in range(x.shape[0]):
-        xi = x[i]
+        xi = np.float32(x[i])
         for j in range(n0):
             h0[j] += xi * W0[i, j]
-    for j in range(n0):
-        h0[j] = _tanh(h0[j])
+    tanh_inplace(h0)
     for j in range(n1):
         h1[j] = b1[j]
     for i in range(n0):
         hi = h0[i]
         for j in range(n1):
             h1[j] += hi * W1[i, j]
-    for j in range(n1):
-        h1[j] = _tanh(h1[j])
+    tanh_inplace(h1)
     for j in range(n2):
-        y[j] = b2[j]
+        h2[j] = b2[j]
     for i in range(n1):
         hi = h1[i]
         for j in range(n2):
-            y[j] += hi * W2[i, j]
+            h2[j] += hi * W2[i, j]
+    for j in range(n2):
+        y[j] = h2[j]
 
 
 @njit(**_JIT)
 def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp, n_modes, W0, b0, W1, b1,
-                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, R, tension, length, status):
-    """Inputs ``X`` (n, 30), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3) and frame K (n, 3, 3) of
-    every ``active`` kite at its time ``t`` (n,) and state ``r``, ``v`` (n, 5, 3), with its bridle lines and status
-    (as :func:`step_kites`)."""
+                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status):
+    """Inputs ``X`` (n, 30), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3), its turbulent part at the
+    masses and the frame origin ``turb`` (n, 6, 3) and frame K (n, 3, 3) of every ``active`` kite at its time ``t``
+    (n,) and state ``r``, ``v`` (n, 5, 3), with its bridle lines and status (as :func:`step_kites`)."""
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
     t_buf = np.empty(1)
-    h0 = np.empty(W0.shape[1])
-    h1 = np.empty(W1.shape[1])
+    h0 = np.empty(W0.shape[1], dtype=np.float32)
+    h1 = np.empty(W1.shape[1], dtype=np.float32)
+    h2 = np.empty(W2.shape[1], dtype=np.float32)
     for k in range(r.shape[0]):
         if not active[k]:
             continue
         kite_inputs(t[k], r[k], v[k], q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k], amp[k],
-                    n_modes, X[k], wind[k], R[k], pos, w6, t_buf)
-        mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, Y[k])
+                    n_modes, X[k], wind[k], R[k], pos, w6, t_buf, turb[k], False)
+        mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         finite = True
         for i in range(5):
@@ -263,19 +327,24 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
 @njit(**_JIT)
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
-               tether_length, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, R, tether, tension, length, status):
+               tether_length, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether, tension, length,
+               status):
     """One RK4 step of ``dt`` for every ``active`` kite, in place (:class:`SurrogateKites.step`).
 
     Stage 1 uses ``Y`` and ``wind`` of the current states (the end of the last step); stages 2-4 evaluate the wing
-    at their states. After the step: the projection onto the constraints, then ``X``, ``Y``, ``wind``, ``R`` at the
+    at their states, with the mean wind and gust at their positions and times and the turbulent wind ``turb``
+    (n, 6, 3) of the start of the step held (the Fourier sum of :class:`kite_env.wind.WindField` is the costliest
+    part of a stage; over one step of 5 ms the kite moves ~0.1 m and the turbulence, of integral length ~100 m,
+    changes by ~1e-3 of its size). After the step: the projection onto the constraints, then ``X``, ``Y``, ``wind``, ``R`` at the
     new states, ``tether`` the tether force at the start of the step [N], the bridle-line ``tension`` and ``length``
     (n, 4) and ``status`` (:data:`OK`; :data:`NON_FINITE`; :data:`OUTSIDE`: an input beyond ``[lo, hi]`` (30,)).
     """
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
     t_buf = np.empty(1)
-    h0 = np.empty(W0.shape[1])
-    h1 = np.empty(W1.shape[1])
+    h0 = np.empty(W0.shape[1], dtype=np.float32)
+    h1 = np.empty(W1.shape[1], dtype=np.float32)
+    h2 = np.empty(W2.shape[1], dtype=np.float32)
     F0 = np.empty((4, 3))
     zero_q = np.zeros((4, 3))
     zero_K = np.zeros((12, 12))
@@ -307,8 +376,8 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                     kv[st, i, c] = v0[i, c] + h * ka[st - 1, i, c]
             vs = kv[st]
             kite_inputs(t[k] + h, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
-                        amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf)
-            mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, ys)
+                        amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf, turb[k], True)
+            mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, h2, ys)
             a_st, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
                                      line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k],
                                      gravity, alpha)
@@ -330,8 +399,8 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                 r[k, i, c] = rp[i, c]
                 v[k, i, c] = vp[i, c]
         kite_inputs(t[k], r[k], v[k], q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k], amp[k],
-                    n_modes, X[k], wind[k], R[k], pos, w6, t_buf)
-        mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, Y[k])
+                    n_modes, X[k], wind[k], R[k], pos, w6, t_buf, turb[k], False)
+        mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         status[k] = _status(ok, X[k], Y[k], lo, hi)
 
@@ -374,7 +443,8 @@ class SurrogateKites:
         W[-1] = W[-1] * surrogate.y_std[None, :]
         if len(W) != 3:
             raise ValueError(f"the fast fidelity needs a surrogate with two hidden layers, got {len(W) - 1}")
-        self._W, self._b = [np.ascontiguousarray(w) for w in W], [np.ascontiguousarray(c) for c in b]
+        self._W = [np.ascontiguousarray(w, dtype=np.float32) for w in W]
+        self._b = [np.ascontiguousarray(c, dtype=np.float32) for c in b]
         span = surrogate.x_max - surrogate.x_min
         self._lo = surrogate.x_min - envelope_margin * span
         self._hi = surrogate.x_max + envelope_margin * span
@@ -397,6 +467,7 @@ class SurrogateKites:
         self.Y = np.zeros((n, 17))
         self.R = np.zeros((n, 3, 3))
         self.wind = np.zeros((n, 5, 3))
+        self.turb = np.zeros((n, 6, 3))
         self.tension = np.zeros((n, 4))
         self.length = np.zeros((n, 4))
         self.tether_force = np.full(n, np.nan)
@@ -433,8 +504,8 @@ class SurrogateKites:
         active = self._all if active is None else np.asarray(active, dtype=np.bool_)
         evaluate_kites(self.t, self.r, self.v, self.rest, self.q_design, self.wind_f, self.wind_i, self.wavevec_t,
                        self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights, self.k_c, self.c_c,
-                       self._lo, self._hi, active, self.X, self.Y, self.wind, self.R, self.tension, self.length,
-                       self.status)
+                       self._lo, self._hi, active, self.X, self.Y, self.wind, self.turb, self.R, self.tension,
+                       self.length, self.status)
 
     def outside(self, k: int) -> list[str]:
         """Names of the inputs of kite ``k`` beyond the envelope."""
@@ -457,8 +528,8 @@ class SurrogateKites:
         step_kites(self.dt, active, self.t, self.r, self.v, self.rest, self.pair_damping, self.q_design, self.wind_f,
                    self.wind_i, self.wavevec_t, self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights,
                    self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d, self.l_t,
-                   self.tip_lengths, self.g, self.baumgarte, self._lo, self._hi, self.X, self.Y, self.wind, self.R,
-                   self.tether_force, self.tension, self.length, self.status)
+                   self.tip_lengths, self.g, self.baumgarte, self._lo, self._hi, self.X, self.Y, self.wind, self.turb,
+                   self.R, self.tether_force, self.tension, self.length, self.status)
         return self.status
 
 
@@ -535,7 +606,7 @@ class SurrogateFlightSimulator(FlightSimulator):
     surrogate : SurrogateWing, optional (default: the shipped model of ``cfg.kite.name``)
     surrogate_path : path of ``surrogate``'s weights, optional: its start table is ``<stem>_start.npz`` next to it
     wing : AeroelasticWing, optional (geometry, FE start; built from ``cfg.kite`` when not given)
-    start : {"table", "fe"}
+    start : {"table", "fe", "table_only"}
     start_table : StartTable, optional (default: the shipped one, or the one next to ``surrogate_path``; without
         one the start is solved with the FE wing)
     on_outside : {"error", "fe"}
@@ -547,8 +618,8 @@ class SurrogateFlightSimulator(FlightSimulator):
                  start_table=None, surrogate_path=None):
         from kite_env.polar import nominal_wing
 
-        if start not in ("table", "fe"):
-            raise ValueError(f"start must be 'table' or 'fe', got {start!r}")
+        if start not in ("table", "fe", "table_only"):
+            raise ValueError(f"start must be 'table', 'fe' or 'table_only', got {start!r}")
         if on_outside not in ("error", "fe"):
             raise ValueError(f"on_outside must be 'error' or 'fe', got {on_outside!r}")
         self.cfg, self.wind, self.backend = cfg, wind, "numba"
@@ -559,8 +630,10 @@ class SurrogateFlightSimulator(FlightSimulator):
             surrogate = load_default(cfg.kite.name)
         self.surrogate = surrogate
         self.start_table = start_table
-        if start_table is None and start == "table":
+        if start_table is None and start != "fe":
             self.start_table = _default_start_table(cfg, surrogate_path)
+        if start == "table_only" and self.start_table is None:
+            raise ValueError("start 'table_only' needs a start table; the surrogate has none")
         self.start_mode = start if self.start_table is not None else "fe"
         self.on_outside = on_outside
         self.dt = cfg.dynamics.dt_s
@@ -582,12 +655,14 @@ class SurrogateFlightSimulator(FlightSimulator):
     def _start_wing(self, X):
         """The start from the table; where the table has no converged cell (its grid points next to the query did not
         converge in the cold FE solve, or the query is outside the grid), solved with the FE wing, as the full
-        model does (about 1 s; counted in :attr:`fe_starts`)."""
-        if self.start_mode == "table":
+        model does (about 1 s; counted in :attr:`fe_starts`). With ``start="table_only"`` such a start fails
+        (:class:`SimulationError` "no tabulated start"; the environment then draws another start)."""
+        if self.start_mode in ("table", "table_only"):
             try:
                 return self.start_table.lookup(np.asarray(X.v_kite) - np.asarray(X.v_wind))
-            except ValueError:
-                pass
+            except ValueError as exc:
+                if self.start_mode == "table_only":
+                    raise SimulationError("no tabulated start", str(exc)) from None
         self.fe_starts += 1
         return super()._start_wing(X)
 

@@ -75,7 +75,8 @@ def test_inputs_are_the_sampled_features(setup):
     ks.set_wind(0, sim.wind)
     x, w5, Rk = np.empty(30), np.empty((5, 3)), np.empty((3, 3))
     kite_inputs(rec.t, r, v, ks.q_design, ks.wind_f[0], ks.wind_i[0], ks.wavevec_t[0], ks.phase0[0], ks.omega_m[0],
-                ks.amp[0], ks.n_modes, x, w5, Rk, np.empty((6, 3)), np.empty((6, 3)), np.empty(1))
+                ks.amp[0], ks.n_modes, x, w5, Rk, np.empty((6, 3)), np.empty((6, 3)), np.empty(1), np.empty((6, 3)),
+                False)
     assert np.abs(ref).max() > 1.0 and np.abs(ref[12:24]).max() > 1e-3  # a state that moves
     np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(Rk, R, atol=1e-14)
@@ -156,3 +157,37 @@ def test_outside_the_envelope_raises_or_falls_back(setup):
     fb.kites._hi = x_max
     rec2 = fb.step(fb.L_B0, fb.L_D0)
     assert rec2.wing.nodes.shape == wing.mesh.nodes.shape and not np.array_equal(rec2.wing.nodes, wing.mesh.nodes)
+
+
+def test_compiled_tanh_is_accurate():
+    """The rational tanh of the compiled MLP is tanh to 3e-10 on the whole real line (clamped beyond |x| = 12) and
+    keeps NaN."""
+    from kite_env.dynamics.fast import tanh_inplace
+
+    x = np.concatenate([np.linspace(-30.0, 30.0, 200_001), [0.0, 1e-300, -1e-300, np.inf, -np.inf]])
+    h = x.copy()
+    tanh_inplace(h)
+    assert np.abs(h - np.tanh(x)).max() < 3e-10
+    assert np.all(np.sign(h) == np.sign(x)) and np.all(np.abs(h) <= 1.0 + 3e-10)
+    nan = np.array([np.nan, 0.5])
+    tanh_inplace(nan)
+    assert np.isnan(nan[0]) and abs(nan[1] - np.tanh(0.5)) < 3e-10
+
+
+def test_compiled_mlp_is_the_surrogate(setup):
+    """The compiled float32 MLP with the normalisations folded in gives SurrogateWing.predict (float64 NumPy) to
+    float32 round-off, over inputs spread across the sampled envelope."""
+    from kite_env.dynamics.fast import mlp_row
+
+    cfg, wing, sw, _ = setup
+    ks = SurrogateKites(cfg, sw, wing.design_bridle, np.ones(2), 1)
+    rng = np.random.default_rng(5)
+    X = sw.x_min + rng.uniform(0.0, 1.0, (200, sw.x_min.size)) * (sw.x_max - sw.x_min)
+    ref = sw.predict(X)
+    h = [np.empty(w.shape[1], dtype=np.float32) for w in ks._W]
+    got = np.empty_like(ref)
+    for i in range(len(X)):
+        mlp_row(X[i], *ks._weights, *h, got[i])
+    scale = np.maximum(np.abs(ref).max(axis=0), sw.y_std)
+    assert np.abs(got - ref).max(axis=0).max() > 0.0  # float32: not bit-identical
+    np.testing.assert_array_less(np.abs(got - ref) / scale, 2e-5)

@@ -126,3 +126,28 @@ def test_shipped_files_of_rhino16():
     assert np.all(np.isfinite(q0)) and F_b.sum(axis=0)[2] < 0
     with pytest.raises(FileNotFoundError, match="no shipped reduced-order wing weights for kite 'nokite'"):
         load_default("nokite")
+
+
+def test_table_only_start_fails_where_the_table_has_no_cell_and_the_env_redraws(table):
+    """With ``sim.surrogate_start: table_only`` a start outside the table raises "no tabulated start" (no FE solve),
+    and the environment's reset draws another start until one is tabulated."""
+    from kite_env.dynamics.fast import SurrogateFlightSimulator
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    el = np.radians(30.0)
+    R0 = np.array([np.cos(el), 0.0, np.sin(el)])
+    sim = SurrogateFlightSimulator(Config(), _Uniform([4.0 / np.cos(el), 0.0, 0.0]), start="table_only",
+                                   start_table=table)
+    with pytest.raises(SimulationError, match="no tabulated start"):
+        sim.reset(R0, np.array([0.0, 1.0, 0.0]), speed_mps=30.0)  # s ~ 30 m/s: beyond the 20-22 m/s grid
+    assert sim.fe_starts == 0
+    over = ["sim.surrogate_start=table_only", "env.random_start=true", "env.wind_speed_min_mps=4",
+            "env.wind_speed_max_mps=10", "env.initial_speed_min_mps=10", "env.initial_speed_max_mps=40",
+            "env.reset_attempts=200"]
+    env = KiteFigureEightEnv(overrides=over, fidelity="surrogate")
+    speeds = []
+    for seed in range(6):
+        _, info = env.reset(seed=seed)
+        speeds.append(info["initial_speed_mps"])
+    assert env.sim.fe_starts == 0
+    assert len(set(speeds)) == 6
