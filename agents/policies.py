@@ -8,6 +8,9 @@ Policy specifications (``kite-eval --policy``):
 ``baseline``               the paper's steering controller (:class:`agents.baseline.BaselineAgent`)
 ``random``                 uniform random actions in [-1, 1] (seeded: same seed, same actions)
 ``constant:<value>``       the same normalised action ``value`` in [-1, 1] at every step (``constant:0``: dl* = 0)
+``ppo``, ``sac``           the shipped trained model of that name: ``agents/models/<name>/model.zip`` (with the
+                           ``vecnormalize.pkl`` and the ``config.yml`` of its ``kite-train`` run next to it; see
+                           ``agents/models/README.md``)
 ``<path>/model.zip``       a PPO or SAC model saved by ``kite-train`` (or SB3); the ``vecnormalize.pkl`` next to it,
                            if any, normalises the observations as in training
 =========================  ==========================================================================================
@@ -23,8 +26,28 @@ from pathlib import Path
 import numpy as np
 
 
+#: folder of the shipped trained models, one sub-folder per name (``<name>/model.zip``)
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+#: names of the shipped models (``kite-eval --policy ppo``)
+SHIPPED = ("ppo", "sac")
+
+
 class PolicyError(ValueError):
     """A policy specification or model file that cannot be used (the message names the problem)."""
+
+
+def shipped_model(name: str) -> Path:
+    """Path of the shipped model ``name`` (one of :data:`SHIPPED`), whether or not it is there."""
+    return MODELS_DIR / name / "model.zip"
+
+
+def model_path(spec: str) -> Path | None:
+    """The model file a policy specification names (a shipped name or a ``.zip`` path), None for the others."""
+    if spec in SHIPPED:
+        return shipped_model(spec)
+    if spec.endswith(".zip"):
+        return Path(spec)
+    return None
 
 
 class RandomAgent:
@@ -128,15 +151,22 @@ def make_agent(spec: str, env, seed: int = 0):
         except ValueError:
             raise PolicyError(f"constant policy needs a number, got {raw!r} (e.g. constant:0)") from None
         return ConstantAgent(value)
+    if spec in SHIPPED:
+        path = shipped_model(spec)
+        if not path.is_file():
+            raise PolicyError(f"policy {spec!r}: no shipped model, '{path}' does not exist (train one with kite-train "
+                              f"and copy its run folder there, or give the path of a model.zip)")
+        return load_model_agent(path, env)
     if spec.endswith(".zip") or Path(spec).exists():
         return load_model_agent(spec, env)
     raise PolicyError(f"unknown policy {spec!r} (valid: baseline, random, constant:<value in [-1, 1]>, "
-                      f"<path to model.zip>)")
+                      f"{', '.join(SHIPPED)}, <path to model.zip>)")
 
 
 def policy_label(spec: str) -> str:
-    """A short name for tables and folder names: ``baseline``, ``random``, ``constant_0``, ``ppo_<folder>``."""
-    if spec in ("baseline", "random"):
+    """A short name for tables and folder names: ``baseline``, ``random``, ``constant_0``, ``ppo`` / ``sac`` (the
+    shipped models), ``ppo_<folder>`` (a model file)."""
+    if spec in ("baseline", "random", *SHIPPED):
         return spec
     if spec.startswith("constant:"):
         return "constant_" + spec.split(":", 1)[1].replace("-", "m").replace(".", "p")
@@ -148,5 +178,5 @@ def policy_label(spec: str) -> str:
     return f"{algo}_{p.resolve().parent.name}"
 
 
-__all__ = ["ConstantAgent", "ModelAgent", "PolicyError", "RandomAgent", "load_model_agent", "make_agent",
-           "model_algorithm", "policy_label"]
+__all__ = ["MODELS_DIR", "SHIPPED", "ConstantAgent", "ModelAgent", "PolicyError", "RandomAgent", "load_model_agent",
+           "make_agent", "model_algorithm", "model_path", "policy_label", "shipped_model"]

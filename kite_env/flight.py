@@ -149,12 +149,16 @@ class FlightRecorder:
 def evaluation_config(cfg: Config, duration_s: float | None = None, randomize: bool = False) -> Config:
     """``cfg`` with the environment set up for an evaluation at the configured conditions: the wind section as it
     is (no randomisation), the start at the crossing at ``sim.initial_speed_mps``, episodes of ``duration_s``
-    (default ``sim.duration_s``). ``randomize``: draw wind and start from the ``env`` ranges instead."""
+    (default ``sim.duration_s``). ``randomize``: draw wind and start from the ``env`` ranges instead. The
+    training-only start rule ``sim.surrogate_start: table_only`` (a trained model's config) becomes ``table``: an
+    evaluation starts every episode it draws, as the full model does."""
     duration = cfg.sim.duration_s if duration_s is None else float(duration_s)
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
     env = dataclasses.replace(cfg.env, randomize=randomize, max_episode_s=duration)
-    return dataclasses.replace(cfg, env=env, sim=dataclasses.replace(cfg.sim, duration_s=duration))
+    start = "table" if cfg.sim.surrogate_start == "table_only" else cfg.sim.surrogate_start
+    return dataclasses.replace(cfg, env=env, sim=dataclasses.replace(cfg.sim, duration_s=duration,
+                                                                     surrogate_start=start))
 
 
 def run_episode(env, agent, seed: int | None = None, options: dict | None = None,

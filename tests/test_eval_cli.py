@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
+import kite_env.envs.figure_eight
 import kite_env.flight
 import kite_env.plots
 from kite_env.cli.eval import main
@@ -63,9 +64,71 @@ def test_bad_input_exit_2_one_line_no_output(tmp_path, capsys, monkeypatch, args
 
 
 def test_unknown_policy_lists_valid_ones(tmp_path, capsys):
-    assert main(["--policy", "ppo", "--out", str(tmp_path / "x")]) == 2
+    assert main(["--policy", "ppo2", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
-    assert "'ppo'" in err and "valid: baseline" in err
+    assert "'ppo2'" in err and "valid: baseline" in err and "ppo, sac" in err
+
+
+@pytest.mark.parametrize("args", [["--policy", "ppo"], ["--compare", "baseline", "sac"]])
+def test_shipped_name_without_model_is_one_clear_error(tmp_path, capsys, monkeypatch, args):
+    import agents.policies
+
+    models = tmp_path / "models"
+    monkeypatch.setattr(agents.policies, "MODELS_DIR", models)
+    name = args[-1]
+    assert main([*args, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("kite-eval: error: ")
+    assert f"'{name}'" in err[0] and str(models / name / "model.zip") in err[0]
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.fixture(scope="module")
+def shipped_ppo(tmp_path_factory):
+    """A models folder holding a tiny kite-train PPO run (16 steps, fast fidelity, w_traction 0.3) as ``ppo``."""
+    import shutil
+
+    from kite_env.cli import train as train_cli
+
+    base = tmp_path_factory.mktemp("models")
+    hp = base / "hp.yaml"
+    hp.write_text(yaml.safe_dump({"default": {"n_steps": 8, "batch_size": 8, "n_epochs": 1, "checkpoint_freq": 10**6,
+                                              "eval_freq": 10**6}}))
+    run = base / "run"
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "16", "--out", str(run), "--config", str(hp),
+                           "--fidelity", "surrogate", "--set", "env.max_episode_s=0.2",
+                           "--set", "env.w_traction=0.3"]) == 0
+    models = base / "models"
+    (models / "ppo").mkdir(parents=True)
+    for name in ("model.zip", "vecnormalize.pkl", "config.yml"):
+        shutil.copy(run / name, models / "ppo" / name)
+    return models
+
+
+def test_shipped_name_flies_the_model_with_its_config(shipped_ppo, tmp_path, monkeypatch):
+    """``--policy ppo`` loads agents/models/ppo/model.zip with its normalisation, and the environment is that of
+    the model's config.yml (surrogate fidelity, w_traction 0.3), --set on top."""
+    import agents.policies
+
+    monkeypatch.setattr(agents.policies, "MODELS_DIR", shipped_ppo)
+    monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])  # figures: tested above
+    env = kite_env.envs.figure_eight.KiteFigureEightEnv(overrides=["env.max_episode_s=0.2"], fidelity="surrogate")
+    agent = agents.policies.make_agent("ppo", env)
+    assert agent.obs_norm is not None and agent.model.num_timesteps == 16
+    assert agents.policies.policy_label("ppo") == "ppo"
+    out = tmp_path / "cmp"
+    assert main(["--compare", "ppo", "random", "--duration", "0.1", "--set", "sim.warmup_s=0.02",
+                 "--fidelity", "surrogate", "--out", str(out), "--quiet"]) == 0
+    m = json.loads((out / "ppo" / "metrics.json").read_text())
+    assert m["policy"] == "ppo" and m["episode_rows"][0]["episode_steps"] <= 5
+    cfg = yaml.safe_load((out / "ppo" / "config.yaml").read_text())
+    assert cfg["sim"]["fidelity"] == "surrogate" and cfg["env"]["w_traction"] == 0.3
+    assert cfg["sim"]["duration_s"] == pytest.approx(0.1)
+    # the return is the sum of the reward terms with the model's weights
+    r = m["episode_rows"][0]
+    assert r["episode_return"] == pytest.approx(sum(v for k, v in r.items() if k.startswith("reward_")))
+    other = yaml.safe_load((out / "random" / "config.yaml").read_text())
+    assert other["env"]["w_traction"] == 0.5  # the default config, not the model's
 
 
 def test_out_is_a_file_or_missing(tmp_path, capsys):

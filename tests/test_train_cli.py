@@ -29,6 +29,7 @@ def _hp(tmp_path, algo, **extra):
     return str(f)
 
 
+@pytest.mark.slow  # the FE model: ~15-35 s
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_short_training_run_gives_a_loadable_model(tmp_path, algo):
     from stable_baselines3 import PPO, SAC
@@ -60,6 +61,7 @@ def test_short_training_run_gives_a_loadable_model(tmp_path, algo):
     assert m["episode_rows"][0]["episode_steps"] == 5 and np.isfinite(m["episode_return"])
 
 
+@pytest.mark.slow  # the FE model: ~15-35 s
 def test_resume_continues_from_the_last_checkpoint(tmp_path):
     from stable_baselines3 import PPO
 
@@ -88,6 +90,7 @@ def test_bad_input_is_one_clear_error(tmp_path, capsys):
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow  # the FE model: ~15-35 s
 def test_kite_bench_writes_bench_json(tmp_path, capsys):
     import json
 
@@ -101,3 +104,142 @@ def test_kite_bench_writes_bench_json(tmp_path, capsys):
     assert "env steps/s" in capsys.readouterr().out
     assert bench.main(["--out", str(tmp_path / "x"), "--set", "env.nope=1"]) == 2
     assert not (tmp_path / "x").exists()
+
+
+# ------------------------------------------------------------------ recipes and the batched fast env (issue 6)
+FAST = ["--fidelity", "surrogate", "--set", "env.max_episode_s=0.3"]
+RECIPE_ENV = {"env.wind_speed_min_mps": 4.0, "env.wind_speed_max_mps": 9.0, "env.random_start": True,
+              "env.initial_speed_min_mps": 19.0}
+
+
+def _recipe(tmp_path, algo, **extra):
+    """A recipe for KiteFigureEightFast-v0: 4 batched envs, the env overrides above, a tiny algorithm."""
+    base = {"ppo": {"n_steps": 8, "batch_size": 16, "n_epochs": 1},
+            "sac": {"learning_starts": 8, "batch_size": 8, "buffer_size": 1000}}[algo]
+    f = tmp_path / f"recipe_{algo}.yaml"
+    f.write_text(yaml.safe_dump({
+        "default": {**base, "checkpoint_freq": 32, "eval_freq": 10**6, "env": {"env.w_traction": 0.25}},
+        "KiteFigureEight-v0": {"env": {"env.w_traction": 0.75}},
+        "KiteFigureEightFast-v0": {"n_envs": 4, "vec_env": "batched", "env": dict(RECIPE_ENV), **extra}}))
+    return str(f)
+
+
+def _params(path) -> dict:
+    from stable_baselines3 import PPO, SAC
+
+    algo = {"ppo": PPO, "sac": SAC}[path.parent.name.split("_")[0]]
+    return {k: v.numpy().copy() for k, v in algo.load(path, device="cpu").policy.state_dict().items()}
+
+
+def test_recipe_overrides_as_set_strings(tmp_path):
+    hp = train_cli.load_hyperparameters(_recipe(tmp_path, "ppo"), "ppo", train_cli.FAST_ENV_ID)
+    assert hp["n_envs"] == 4 and hp["vec_env"] == "batched" and hp["n_steps"] == 8
+    # the default entry's env mapping merged with the env id's
+    assert sorted(train_cli.recipe_overrides(hp)) == ["env.initial_speed_min_mps=19.0", "env.random_start=true",
+                                                      "env.w_traction=0.25", "env.wind_speed_max_mps=9.0",
+                                                      "env.wind_speed_min_mps=4.0"]
+    fe = train_cli.load_hyperparameters(_recipe(tmp_path, "ppo"), "ppo", train_cli.ENV_ID)
+    assert train_cli.recipe_overrides(fe) == ["env.w_traction=0.75"] and "vec_env" not in fe
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({"default": {"vec_env": "threads"}}))
+    with pytest.raises(train_cli.UsageError, match="vec_env"):
+        train_cli.load_hyperparameters(bad, "ppo")
+
+
+@pytest.mark.parametrize("path", AGENT_CONFIGS, ids=[p.name for p in AGENT_CONFIGS])
+def test_shipped_recipes_give_the_training_conditions(path):
+    from kite_env.config import load_config
+
+    hp = train_cli.load_hyperparameters(path, path.stem, train_cli.FAST_ENV_ID)
+    assert hp["n_envs"] == 16 and hp["vec_env"] == "batched"
+    env = load_config(None, train_cli.recipe_overrides(hp)).env
+    assert (env.wind_speed_min_mps, env.wind_speed_max_mps) == (4.0, 10.0)
+    assert env.turbulence_intensity_max == 0.15 and env.random_start is True and env.randomize is True
+    assert (env.initial_speed_min_mps, env.initial_speed_max_mps) == (18.0, 26.0)
+
+
+def test_vec_env_kind_defaults_and_errors(tmp_path, capsys):
+    kind = train_cli._vec_env_kind
+    assert kind(None, "surrogate", 4) == "batched" and kind(None, "surrogate", 1) == "dummy"
+    assert kind(None, "fe", 4) == "subproc" and kind(None, "fe", 1) == "dummy"
+    assert kind("dummy", "surrogate", 4) == "dummy" and kind("batched", "surrogate", 1) == "batched"
+    out = tmp_path / "run"
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(out), "--vec-env", "batched",
+                           "--config", _hp(tmp_path, "ppo")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "batched" in err[0] and "surrogate" in err[0]
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def batched_runs(tmp_path_factory):
+    """Tiny PPO runs on 4 batched fast kites: seed 5 twice, seed 6 once, and seed 5 stopped at 32 steps then
+    resumed to 64."""
+    base = tmp_path_factory.mktemp("batched")
+    recipe = _recipe(base, "ppo")
+    rc = {}
+    for name, seed, steps in (("ppo_a", 5, 64), ("ppo_b", 5, 64), ("ppo_c", 6, 64), ("ppo_r", 5, 32)):
+        rc[name] = train_cli.main(["--algo", "ppo", "--timesteps", str(steps), "--out", str(base / name),
+                                   "--config", recipe, "--seed", str(seed), "--set", "env.wind_speed_max_mps=7.5",
+                                   *FAST])
+    rc["ppo_r2"] = train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(base / "ppo_r"), "--config",
+                                   recipe, "--seed", "5", "--resume", "--set", "env.wind_speed_max_mps=7.5", *FAST])
+    return base, rc
+
+
+def test_batched_run_records_recipe_and_monitor(batched_runs):
+    base, rc = batched_runs
+    assert rc == {"ppo_a": 0, "ppo_b": 0, "ppo_c": 0, "ppo_r": 0, "ppo_r2": 0}
+    out = base / "ppo_a"
+    cfg = yaml.safe_load((out / "config.yml").read_text())
+    assert cfg["sim"]["fidelity"] == "surrogate"
+    env = cfg["env"]
+    assert env["wind_speed_min_mps"] == 4.0 and env["random_start"] is True and env["initial_speed_min_mps"] == 19.0
+    assert env["w_traction"] == 0.25  # the default entry's env
+    assert env["wind_speed_max_mps"] == 7.5  # --set wins over the recipe's 9.0
+    args = yaml.safe_load((out / "args.yml").read_text())
+    assert args["vec_env"] == "batched" and args["n_envs"] == 4 and args["env_id"] == "KiteFigureEightFast-v0"
+    # VecMonitor: one row per finished episode; 0.3 s episodes = at most 15 steps, 16 steps per kite were run
+    lines = (out / "monitor.csv").read_text().splitlines()
+    assert lines[0].startswith("#") and lines[1] == "r,l,t"
+    rows = np.array([[float(x) for x in ln.split(",")] for ln in lines[2:]])
+    assert len(rows) >= 4 and np.all((rows[:, 1] >= 1) & (rows[:, 1] <= 15))
+    assert rows[:, 1].sum() <= 64
+
+
+def test_batched_run_same_seed_same_model(batched_runs):
+    base, _ = batched_runs
+    a, b, c = (_params(base / n / "model.zip") for n in ("ppo_a", "ppo_b", "ppo_c"))
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    assert not all(np.array_equal(a[k], c[k]) for k in a)
+    ma = (base / "ppo_a" / "monitor.csv").read_text().splitlines()[2:]
+    mb = (base / "ppo_b" / "monitor.csv").read_text().splitlines()[2:]
+    assert [r.rsplit(",", 1)[0] for r in ma] == [r.rsplit(",", 1)[0] for r in mb]  # same returns and lengths
+
+
+def test_batched_run_resumes_from_its_checkpoint(batched_runs):
+    from stable_baselines3 import PPO
+
+    base, _ = batched_runs
+    out = base / "ppo_r"
+    assert PPO.load(out / "model.zip", device="cpu").num_timesteps == 64
+    assert {"model_32_steps.zip", "model_64_steps.zip", "model_vecnormalize_32_steps.pkl"} <= {
+        p.name for p in (out / "checkpoints").iterdir()}
+    # the monitor file goes on: the first part's episodes stay, the resumed part's are appended
+    lines = (out / "monitor.csv").read_text().splitlines()
+    assert sum(ln == "r,l,t" for ln in lines) == 1
+    assert int(sum(float(ln.split(",")[1]) for ln in lines[2:])) <= 64
+
+
+def test_batched_sac_with_held_out_evaluations(tmp_path):
+    from stable_baselines3 import SAC
+
+    out = tmp_path / "sac_run"
+    assert train_cli.main(["--algo", "sac", "--timesteps", "48", "--out", str(out), "--seed", "2",
+                           "--config", _recipe(tmp_path, "sac", eval_freq=24, eval_episodes=2), *FAST]) == 0
+    assert SAC.load(out / "model.zip", device="cpu").num_timesteps == 48
+    assert (out / "checkpoints" / "model_replay_buffer_48_steps.pkl").is_file()
+    ev = np.load(out / "eval" / "evaluations.npz")
+    assert list(ev["timesteps"]) == [24, 48] and ev["results"].shape == (2, 2)
+    # a held-out episode is at most 0.3 s = 15 steps; the reward per step is bounded by the crash penalty
+    assert np.all((ev["ep_lengths"] >= 1) & (ev["ep_lengths"] <= 15)) and np.all(np.isfinite(ev["results"]))

@@ -61,7 +61,7 @@ PROG = "kite-eval"
 
 
 #: policies by name; a model file path and ``constant:<value>`` are accepted too (:mod:`agents.policies`)
-POLICIES = ("baseline", "random", "constant:<value>", "<path to model.zip>")
+POLICIES = ("baseline", "random", "constant:<value>", "ppo", "sac", "<path to model.zip>")
 #: per-episode columns of ``episodes.csv`` / ``episode_rows`` taken from the episode's metrics
 EPISODE_METRICS = ("sim_time_s", "crashed", "termination_reason", "figure_eights_completed", "tracking_error_rms_deg",
                    "tether_force_mean_N", "tether_force_max_N", "kite_speed_min_mps", "kite_speed_max_mps",
@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
                 "2 bad input (nothing written), 130 interrupted (nothing written)")
     what = p.add_mutually_exclusive_group()
     what.add_argument("--policy", default="baseline",
-                      help="policy to fly: baseline, random, constant:<a> (a in [-1, 1]) or a model.zip path")
+                      help="policy to fly: baseline, random, constant:<a> (a in [-1, 1]), ppo / sac (the shipped "
+                      "models in agents/models) or a model.zip path")
     what.add_argument("--compare", nargs="+", metavar="POLICY_OR_RUN",
                       help="policies (or existing kite-eval run folders) to evaluate and tabulate side by side")
     p.add_argument("--episodes", type=int, default=1, help="episodes per policy (default 1)")
@@ -198,14 +199,14 @@ def _model_config(spec: str) -> str | None:
 
 def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
     """Config, environment and agent for ``spec``; raises ConfigError / PolicyError / ValueError on bad input."""
-    from agents.policies import make_agent
+    from agents.policies import make_agent, model_path
     from kite_env.config import ConfigError, load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config
     from kite_env.geometry import KITES
 
-    is_model = spec.endswith(".zip")
-    config_file = args.config if args.config is not None or not is_model else _model_config(spec)
+    model = model_path(spec)  # a model.zip path or a shipped model's (ppo, sac)
+    config_file = args.config if args.config is not None or model is None else _model_config(str(model))
     if config_file is not None and not Path(config_file).is_file():
         raise ConfigError(f"--config file {config_file!r} does not exist")
     cfg = load_config(config_file, overrides)
@@ -327,12 +328,12 @@ def compare_table(results: list[tuple[str, dict]]) -> tuple[str, list[dict]]:
 
 
 def _labels(specs: list[str]) -> list[str]:
-    from agents.policies import policy_label
+    from agents.policies import SHIPPED, policy_label
 
     out: list[str] = []
     for spec in specs:
         p = Path(spec)
-        base = p.name if p.is_dir() else policy_label(spec)
+        base = p.name if p.is_dir() and spec not in SHIPPED else policy_label(spec)
         label, k = base, 2
         while label in out:
             label, k = f"{base}_{k}", k + 1
@@ -359,12 +360,14 @@ def main(argv=None) -> int:
         overrides.append(f"sim.fidelity={args.fidelity}")
     if args.config is not None and not Path(args.config).is_file():
         return _fail(f"--config file {args.config!r} does not exist")
+    from agents.policies import SHIPPED
+
     specs = list(args.compare) if args.compare else [args.policy]
     jobs: list[_Job] = []
     try:
         for spec, label in zip(specs, _labels(specs)):
             run = Path(spec)
-            if args.compare and run.is_dir():
+            if args.compare and run.is_dir() and spec not in SHIPPED:  # the names ppo, sac: the shipped models
                 if not (run / "metrics.json").is_file():
                     return _fail(f"--compare: folder {spec!r} has no metrics.json (not a kite-eval run)")
                 jobs.append(_Job(spec, label, run_dir=run))

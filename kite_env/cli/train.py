@@ -1,13 +1,28 @@
 """``kite-train``: train a PPO or SAC agent (Stable-Baselines3) on ``KiteFigureEight-v0``.
 
     kite-train --algo ppo|sac --timesteps N --out runs/ppo [--config configs/agents/ppo.yaml] [--n-envs K]
-               [--seed S] [--resume] [--env-config FILE] [--set section.key=value ...]
+               [--vec-env batched|subproc|dummy] [--fidelity fe|surrogate] [--seed S] [--resume]
+               [--env-config FILE] [--set section.key=value ...]
 
 Hyperparameters come from a YAML file keyed by environment id, with a ``default`` entry (``configs/agents/``);
-the environment and physics from the project config (``--env-config``, ``--set``). The run folder gets
-``config.yml`` (the complete environment config), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/``,
-periodic checkpoints with the VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final
-``model.zip`` (+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one.
+the environment and physics from the project config (``--env-config``, ``--set``). An entry of the hyperparameter
+file is a training recipe (rl-zoo style): besides the algorithm's arguments it may hold
+
+* ``env``: a mapping ``section.key: value`` of project-config overrides (as ``--set``), applied after
+  ``--env-config`` and before ``--set`` (the command line wins); the ``default`` entry's mapping is merged with the
+  env id's,
+* ``n_envs``: parallel environments (``--n-envs`` wins),
+* ``vec_env``: ``batched`` (all kites in one :class:`kite_env.envs.vector.SB3VecEnv`, surrogate fidelity only),
+  ``subproc`` (one process per env) or ``dummy`` (all in this process, one after the other); ``--vec-env`` wins.
+  Default: ``batched`` for the surrogate fidelity with more than one env, else ``subproc`` for several envs and
+  ``dummy`` for one.
+
+The training env is wrapped in ``VecMonitor`` (episode returns and lengths in ``OUT/monitor.csv``) and, with
+``normalize``, ``VecNormalize``; the evaluation env (``EvalCallback``) draws the same randomised conditions with
+the held-out seed ``seed + 10_000``. The run folder gets ``config.yml`` (the complete environment config, recipe
+and ``--set`` applied), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/``, periodic checkpoints with the
+VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final ``model.zip``
+(+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one.
 """
 
 from __future__ import annotations
@@ -25,8 +40,11 @@ from kite_env.config import FIDELITIES, ConfigError, load_config
 ALGOS = ("ppo", "sac")
 ENV_ID = "KiteFigureEight-v0"
 FAST_ENV_ID = "KiteFigureEightFast-v0"  # the same env with sim.fidelity = surrogate (hyperparameters keyed by it)
+VEC_ENVS = ("batched", "subproc", "dummy")
 #: hyperparameter keys that are not constructor arguments of the algorithm
-_META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs"}
+_META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs", "env", "vec_env"}
+#: offset of the evaluation env's seed from the training seed (held-out episodes)
+EVAL_SEED_OFFSET = 10_000
 _DEFAULT_HP = {
     "ppo": {"policy": "MlpPolicy", "normalize": True, "learning_rate": 3.0e-4, "n_steps": 512, "batch_size": 64,
             "gamma": 0.99, "gae_lambda": 0.95, "n_epochs": 10, "ent_coef": 0.0, "clip_range": 0.2,
@@ -55,36 +73,83 @@ def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = ENV_I
         raise UsageError(f"hyperparameter file '{p}' is not valid YAML: {exc}") from None
     if not isinstance(data, dict):
         raise UsageError(f"hyperparameter file '{p}' must map env ids (and 'default') to settings")
+    env_overrides: dict = {}
     for key in ("default", env_id):
         entry = data.get(key) or {}
         if not isinstance(entry, dict):
             raise UsageError(f"hyperparameter file '{p}': entry '{key}' must be a mapping")
+        env = entry.get("env") or {}
+        if not isinstance(env, dict):
+            raise UsageError(f"hyperparameter file '{p}': '{key}.env' must map 'section.key' to values")
+        env_overrides.update(env)
         hp.update(entry)
+    if env_overrides:
+        hp["env"] = env_overrides
+    vec = hp.get("vec_env")
+    if vec is not None and vec not in VEC_ENVS:
+        raise UsageError(f"hyperparameter file '{p}': vec_env must be one of {', '.join(VEC_ENVS)}, got {vec!r}")
     return hp
 
 
-def _make_env(cfg, seed: int, rank: int):
-    def thunk():
-        from stable_baselines3.common.monitor import Monitor
+def recipe_overrides(hp: dict) -> list[str]:
+    """The recipe's ``env`` mapping as ``--set`` strings ``section.key=value`` (values as YAML scalars)."""
+    out = []
+    for key, value in (hp.get("env") or {}).items():
+        if isinstance(value, bool):
+            text = "true" if value else "false"
+        elif isinstance(value, (int, float, str)):
+            text = repr(value) if isinstance(value, float) else str(value)
+        else:
+            raise UsageError(f"recipe env override '{key}': expected a scalar, got {value!r}")
+        out.append(f"{key}={text}")
+    return out
 
+
+def _make_env(cfg):
+    def thunk():
         from kite_env.envs.figure_eight import KiteFigureEightEnv
 
-        env = Monitor(KiteFigureEightEnv(config=cfg))
-        env.reset(seed=seed + rank)
-        return env
+        return KiteFigureEightEnv(config=cfg)
 
     return thunk
 
 
-def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, training: bool = True):
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: str, training: bool = True,
+             monitor_file: Path | None = None, append: bool = False):
+    """``n_envs`` envs of ``cfg`` as a ``kind`` VecEnv (``VEC_ENVS``) seeded ``seed + i``, in ``VecMonitor`` (writing
+    ``monitor_file``, appended to with ``append``) and, with ``normalize``, ``VecNormalize``."""
+    from stable_baselines3.common.monitor import ResultsWriter
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
-    fns = [_make_env(cfg, seed, i) for i in range(n_envs)]
-    venv = SubprocVecEnv(fns) if n_envs > 1 else DummyVecEnv(fns)
-    venv.seed(seed)
+    if kind == "batched":
+        from kite_env.envs.vector import KiteFigureEightVectorEnv, SB3VecEnv
+
+        try:
+            venv = SB3VecEnv(KiteFigureEightVectorEnv(n_envs, config=cfg, fidelity=None))
+        except ValueError as exc:  # not the surrogate fidelity, or sim.surrogate_fallback
+            raise UsageError(f"--vec-env batched: {exc}") from None
+    else:
+        fns = [_make_env(cfg) for _ in range(n_envs)]
+        venv = SubprocVecEnv(fns) if kind == "subproc" else DummyVecEnv(fns)
+    venv.seed(seed)  # env i: reset(seed=seed + i) at the first reset
+    if monitor_file is not None and append and monitor_file.is_file():
+        venv = VecMonitor(venv)  # continue the run's monitor file (the column t restarts at 0 in a resumed run)
+        venv.results_writer = ResultsWriter(str(monitor_file), override_existing=False)
+    else:
+        venv = VecMonitor(venv, filename=None if monitor_file is None else str(monitor_file))
     if normalize:
         venv = VecNormalize(venv, gamma=gamma, training=training, norm_reward=training)
     return venv
+
+
+def _vec_env_kind(requested: str | None, fidelity: str, n_envs: int) -> str:
+    if requested is None:
+        if fidelity == "surrogate" and n_envs > 1:
+            return "batched"
+        return "subproc" if n_envs > 1 else "dummy"
+    if requested == "batched" and fidelity != "surrogate":
+        raise UsageError(f"vec_env 'batched' needs sim.fidelity surrogate, got {fidelity!r} (use subproc or dummy)")
+    return requested
 
 
 def _latest_checkpoint(ckpt_dir: Path):
@@ -107,12 +172,19 @@ def train(args) -> Path:
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
 
     out = Path(args.out)
-    cfg = load_config(args.env_config, [*args.set, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])])
+    cli_sets = [*args.set, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])]
+    cfg = load_config(args.env_config, cli_sets)
     env_id = FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID
     hp = load_hyperparameters(args.config, args.algo, env_id)
+    if hp.get("env"):  # the recipe's environment, then the command line's --set (which wins)
+        cfg = load_config(args.env_config, [*recipe_overrides(hp), *cli_sets])
+        if (FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID) != env_id:
+            raise UsageError(f"the recipe for {env_id} changes sim.fidelity to {cfg.sim.fidelity!r} (set the fidelity "
+                             "with --fidelity, not in the recipe's env)")
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
     if n_envs < 1:
         raise UsageError(f"--n-envs must be >= 1, got {n_envs}")
+    kind = _vec_env_kind(args.vec_env or hp.get("vec_env"), cfg.sim.fidelity, n_envs)
     ckpt_dir = out / "checkpoints"
     latest = _latest_checkpoint(ckpt_dir) if args.resume else None
     if args.resume and latest is None:
@@ -123,11 +195,15 @@ def train(args) -> Path:
     torch.set_num_threads(1)
     if not args.resume:
         (out / "config.yml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-        (out / "args.yml").write_text(yaml.safe_dump({**vars(args), "hyperparameters": hp}, sort_keys=False))
+        (out / "args.yml").write_text(yaml.safe_dump({**vars(args), "env_id": env_id, "n_envs": n_envs,
+                                                      "vec_env": kind, "hyperparameters": hp}, sort_keys=False))
         (out / "command.txt").write_text(" ".join(shlex.quote(a) for a in ["kite-train", *sys.argv[1:]]) + "\n")
     gamma = float(hp.get("gamma", 0.99))
-    venv = _vec_env(cfg, n_envs, args.seed, bool(hp["normalize"]), gamma)
-    eval_env = _vec_env(cfg, 1, args.seed + 10_000, bool(hp["normalize"]), gamma, training=False)
+    venv = _vec_env(cfg, n_envs, args.seed, bool(hp["normalize"]), gamma, kind, monitor_file=out / "monitor.csv",
+                    append=latest is not None)
+    # held-out episodes in the same randomised conditions (one env; batched stays batched, one kite)
+    eval_env = _vec_env(cfg, 1, args.seed + EVAL_SEED_OFFSET, bool(hp["normalize"]), gamma,
+                        "batched" if kind == "batched" else "dummy", training=False)
     kwargs = {k: v for k, v in hp.items() if k not in _META_KEYS}
     Algo = _algo_class(args.algo)
     if latest is not None:
@@ -151,8 +227,8 @@ def train(args) -> Path:
     callbacks = [
         CheckpointCallback(save_freq=freq, save_path=str(ckpt_dir), name_prefix="model",
                            save_vecnormalize=bool(hp["normalize"]), save_replay_buffer=args.algo == "sac"),
-        EvalCallback(eval_env, n_eval_episodes=int(hp["eval_episodes"]), eval_freq=max(1, int(hp["eval_freq"]) // n_envs),
-                     log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), deterministic=True),
+        EvalCallback(eval_env, n_eval_episodes=int(hp["eval_episodes"]),
+                     eval_freq=max(1, int(hp["eval_freq"]) // n_envs), log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), deterministic=True),
     ]
     if hp["normalize"]:
         from stable_baselines3.common.callbacks import BaseCallback
@@ -209,7 +285,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env-config", default=None, help="project config YAML for the environment and physics")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override any project config value (repeatable)")
-    p.add_argument("--n-envs", type=int, default=None, help="parallel environments (SubprocVecEnv when > 1)")
+    p.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the recipe's n_envs, "
+                   "else 1)")
+    p.add_argument("--vec-env", choices=VEC_ENVS, default=None,
+                   help="how the envs run: batched (one SB3VecEnv over all kites; surrogate fidelity), subproc or "
+                        "dummy; default: the recipe's vec_env, else batched for surrogate with n_envs > 1, subproc "
+                        "for n_envs > 1, dummy for 1")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--fidelity", choices=FIDELITIES, default=None,
                    help="wing model of the training env: fe (the aeroelastic FE wing) or surrogate (reduced-order "

@@ -1,0 +1,91 @@
+"""scripts/benchmark_agents.py: the rl-zoo style benchmark table from kite-eval comparisons, training steps of a
+model, learning curves from kite-train run folders."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import kite_env.plots
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "benchmark_agents.py"
+ZOO_HEADER = "| algo | env_id | mean_reward | std_reward | n_timesteps | eval_episodes |"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("benchmark_agents", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_tiny_benchmark_writes_the_zoo_table(bench, tmp_path, monkeypatch, capsys):
+    import agents.policies
+
+    monkeypatch.setattr(agents.policies, "MODELS_DIR", tmp_path / "no_models")  # 'sac' is not shipped: left out
+    monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
+    out = tmp_path / "bench"
+    assert bench.main(["--out", str(out), "--policies", "baseline", "random", "sac", "--episodes", "1",
+                       "--duration", "0.5", "--fidelity", "surrogate"]) == 0
+    assert "'sac' left out" in capsys.readouterr().err
+    md = (out / "benchmark.md").read_text().splitlines()
+    assert md[0].startswith(ZOO_HEADER)
+    assert md[0].endswith("| tracking error RMS [deg] | mean tether force [N] | crashes (n/N) | mean flight time [s] |")
+    data = json.loads((out / "benchmark.json").read_text())
+    assert data["skipped"] == ["sac"] and [r["algo"] for r in data["rows"]] == ["baseline", "random"]
+    for line, row in zip(md[2:4], data["rows"]):
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        # the numbers are kite-eval's for the same policy (its metrics.json in OUT/surrogate/<name>/)
+        m = json.loads((out / "surrogate" / row["algo"] / "metrics.json").read_text())
+        ep = m["episode_rows"][0]
+        assert cells[:2] == [row["algo"], "KiteFigureEightFast-v0"]
+        assert float(cells[2]) == pytest.approx(ep["episode_return"], abs=0.005) and float(cells[3]) == 0.0
+        assert cells[4] == "-" and cells[5] == "1"
+        assert cells[8] == f"{int(ep['crashed'])}/1"
+        assert float(cells[9]) == pytest.approx(ep["sim_time_s"], rel=1e-3) and 0 < ep["sim_time_s"] <= 0.5
+        assert ep["seed"] == 1000  # held-out seed
+        # the recipe's randomised conditions, in the fast fidelity
+        cfg = yaml.safe_load((out / "surrogate" / row["algo"] / "config.yaml").read_text())
+        assert cfg["sim"]["fidelity"] == "surrogate" and cfg["env"]["randomize"] is True
+        assert (cfg["env"]["wind_speed_min_mps"], cfg["env"]["wind_speed_max_mps"]) == (4.0, 10.0)
+        assert cfg["env"]["random_start"] is True and cfg["env"]["turbulence_intensity_max"] == 0.15
+
+
+def test_training_steps_from_zip_or_args(bench, tmp_path):
+    a = tmp_path / "a" / "model.zip"
+    a.parent.mkdir()
+    with zipfile.ZipFile(a, "w") as zf:
+        zf.writestr("data", json.dumps({"num_timesteps": 1234, "n_epochs": 10}))
+    assert bench.training_steps(a) == 1234
+    b = tmp_path / "b" / "model.zip"
+    b.parent.mkdir()
+    with zipfile.ZipFile(b, "w") as zf:
+        zf.writestr("data", json.dumps({"n_epochs": 10}))
+    assert bench.training_steps(b) is None
+    (b.parent / "args.yml").write_text(yaml.safe_dump({"algo": "ppo", "timesteps": 99}))
+    assert bench.training_steps(b) == 99
+
+
+def test_learning_curves_from_run_folders(bench, tmp_path, capsys):
+    run = tmp_path / "runs" / "ppo_1"
+    (run / "eval").mkdir(parents=True)
+    np.savez(run / "eval" / "evaluations.npz", timesteps=np.array([100, 200]),
+             results=np.array([[-50.0, -40.0, -45.0], [-30.0, -20.0, -25.0]]), ep_lengths=np.full((2, 3), 10))
+    lengths = [3, 8, 5, 12]
+    (run / "monitor.csv").write_text('#{"t_start": 0.0, "env_id": "None"}\nr,l,t\n'
+                                     + "".join(f"{-10.0 * k},{n},{0.1 * k}\n" for k, n in enumerate(lengths)))
+    ret, steps = bench.read_monitor(run / "monitor.csv")
+    assert list(ret) == [0.0, -10.0, -20.0, -30.0] and list(steps) == [3, 11, 16, 28]
+    out = tmp_path / "out"
+    assert bench.main(["--out", str(out), "--learning-curves", str(run), str(tmp_path / "empty_run")]) == 0
+    assert "empty_run" in capsys.readouterr().err
+    png = (out / "learning_curves.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert sorted(p.name for p in out.iterdir()) == ["learning_curves.png"]  # no evaluation without --policies
