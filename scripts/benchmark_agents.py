@@ -188,10 +188,8 @@ def recipe_env(recipe: Path) -> list[str]:
     from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters, recipe_overrides
 
     algo = "sac" if recipe.stem == "sac" else "ppo"  # only the env entry is used
-    # the training-only start rule (table_only: redraw starts the table lacks) is dropped, so that both fidelities
-    # start every episode from the same draw (the fast one from the table, else from the FE solve)
-    return [o for o in recipe_overrides(load_hyperparameters(recipe, algo, FAST_ENV_ID))
-            if not o.startswith(("sim.surrogate_start=", "env.reset_attempts="))]
+    # the training-only start rule table_only becomes table in every evaluation (flight.evaluation_config)
+    return recipe_overrides(load_hyperparameters(recipe, algo, FAST_ENV_ID))
 
 
 def main(argv=None) -> int:

@@ -228,7 +228,8 @@ def train(args) -> Path:
         CheckpointCallback(save_freq=freq, save_path=str(ckpt_dir), name_prefix="model",
                            save_vecnormalize=bool(hp["normalize"]), save_replay_buffer=args.algo == "sac"),
         EvalCallback(eval_env, n_eval_episodes=int(hp["eval_episodes"]),
-                     eval_freq=max(1, int(hp["eval_freq"]) // n_envs), log_path=str(out / "eval"), best_model_save_path=str(out / "eval"), deterministic=True),
+                     eval_freq=max(1, int(hp["eval_freq"]) // n_envs), log_path=str(out / "eval"),
+                     best_model_save_path=str(out / "eval"), deterministic=True),
     ]
     if hp["normalize"]:
         from stable_baselines3.common.callbacks import BaseCallback
