@@ -445,9 +445,7 @@ class SurrogateKites:
             raise ValueError(f"the fast fidelity needs a surrogate with two hidden layers, got {len(W) - 1}")
         self._W = [np.ascontiguousarray(w, dtype=np.float32) for w in W]
         self._b = [np.ascontiguousarray(c, dtype=np.float32) for c in b]
-        span = surrogate.x_max - surrogate.x_min
-        self._lo = surrogate.x_min - envelope_margin * span
-        self._hi = surrogate.x_max + envelope_margin * span
+        self._lo, self._hi = surrogate.envelope(envelope_margin)
         self.surrogate = surrogate
         self._weights = tuple(a for pair in zip(self._W, self._b) for a in pair)
         n_modes = cfg.wind.turbulence_modes

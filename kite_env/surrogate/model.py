@@ -21,6 +21,11 @@ import numpy as np
 
 from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES
 
+#: absolute widening of the envelope [m, m/s, rad/s]: far below any physical scale of the inputs, far above the
+#: round-off of the frame transformation (about 1e-13 for a kite 80 m out); the input normalisation's floor on the
+#: standard deviation (1e-6) makes such deviations invisible to the MLP
+ENVELOPE_FLOOR = 1e-6
+
 
 @dataclass
 class SurrogateWing:
@@ -64,11 +69,17 @@ class SurrogateWing:
         y = h * self.y_std + self.y_mean
         return y[0] if x.ndim == 1 else y
 
-    def outside(self, x: np.ndarray, margin: float = 0.1) -> list[str]:
-        """Names of the inputs of one query ``x`` (30,) beyond the training range by more than ``margin`` x range."""
-        x = np.asarray(x, dtype=float)
+    def envelope(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (lo, hi) (30,) of the accepted inputs: the training range widened by ``margin`` x range on each
+        side and by :data:`ENVELOPE_FLOOR` (the inputs that vanish by construction, A and C in their own frame K,
+        have a range of round-off only; a query's round-off must not count as leaving it)."""
         span = self.x_max - self.x_min
-        lo, hi = self.x_min - margin * span, self.x_max + margin * span
+        return (self.x_min - margin * span - ENVELOPE_FLOOR, self.x_max + margin * span + ENVELOPE_FLOOR)
+
+    def outside(self, x: np.ndarray, margin: float = 0.1) -> list[str]:
+        """Names of the inputs of one query ``x`` (30,) beyond :meth:`envelope`."""
+        x = np.asarray(x, dtype=float)
+        lo, hi = self.envelope(margin)
         return [INPUT_NAMES[i] for i in np.flatnonzero((x < lo) | (x > hi))]
 
     def save(self, path: str | Path) -> Path:

@@ -139,6 +139,14 @@ def test_surrogate_predict_save_load_and_envelope(tmp_path):
     far = x_mean.copy()
     far[[3, 25]] += 5.0
     assert m.outside(far) == [INPUT_NAMES[3], INPUT_NAMES[25]]
+    # an input that vanishes by construction (A and C in their own frame K) has a range of round-off only: a
+    # query's round-off stays inside, a physical deviation (1 mm/s) does not
+    m.x_min[12], m.x_max[12] = -1e-14, 1e-14
+    roundoff = x_mean.copy()
+    roundoff[12] = 3e-13
+    assert m.outside(roundoff) == []
+    roundoff[12] = 1e-3
+    assert m.outside(roundoff) == [INPUT_NAMES[12]]
     (tmp_path / "bad.npz").write_text("not an npz")
     with pytest.raises(ValueError, match="not a readable"):
         SurrogateWing.load(tmp_path / "bad.npz")
