@@ -104,8 +104,9 @@ def model_algorithm(path: Path) -> str:
     raise PolicyError(f"model file '{path}': neither a PPO nor a SAC model")
 
 
-def load_model_agent(path: str | Path, env) -> ModelAgent:
-    """Load ``path`` (PPO or SAC zip) for ``env``; a ``vecnormalize.pkl`` next to it is applied to observations."""
+def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = None) -> ModelAgent:
+    """Load ``path`` (PPO or SAC zip) for ``env``; the observation normalisation ``vecnormalize`` (default: a
+    ``vecnormalize.pkl`` next to the model, if there is one) is applied to observations."""
     path = Path(path)
     if not path.is_file():
         raise PolicyError(f"model file '{path}' does not exist")
@@ -121,7 +122,9 @@ def load_model_agent(path: str | Path, env) -> ModelAgent:
         raise PolicyError(f"model '{path}' expects observations of shape {model.observation_space.shape}, the "
                           f"environment gives {env.observation_space.shape} (check env.observation in the config)")
     norm = None
-    vn = path.with_name("vecnormalize.pkl")
+    vn = path.with_name("vecnormalize.pkl") if vecnormalize is None else Path(vecnormalize)
+    if vecnormalize is not None and not vn.is_file():
+        raise PolicyError(f"normalisation file '{vn}' does not exist")
     if vn.is_file():
         try:
             norm = pickle.loads(vn.read_bytes())
