@@ -243,3 +243,15 @@ def test_batched_sac_with_held_out_evaluations(tmp_path):
     assert list(ev["timesteps"]) == [24, 48] and ev["results"].shape == (2, 2)
     # a held-out episode is at most 0.3 s = 15 steps; the reward per step is bounded by the crash penalty
     assert np.all((ev["ep_lengths"] >= 1) & (ev["ep_lengths"] <= 15)) and np.all(np.isfinite(ev["results"]))
+
+
+def test_linear_schedules():
+    """``lin_<x>`` (rl-zoo) becomes a rate falling linearly from x to 0 over the run; numbers stay; typos fail."""
+    kw = train_cli.schedules({"learning_rate": "lin_3e-4", "clip_range": 0.2, "n_steps": 8})
+    lr = kw["learning_rate"]
+    assert lr(1.0) == pytest.approx(3e-4) and lr(0.25) == pytest.approx(0.75e-4) and lr(0.0) == 0.0
+    assert kw["clip_range"] == 0.2 and kw["n_steps"] == 8
+    assert train_cli.schedules({"learning_rate": "3e-4"})["learning_rate"] == 3e-4  # YAML's string for 3e-4
+    for bad in ("linear_3e-4", "lin_x", "lin_"):
+        with pytest.raises(train_cli.UsageError, match="learning_rate: expected a number or 'lin_<number>'"):
+            train_cli.schedules({"learning_rate": bad})

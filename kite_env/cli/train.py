@@ -91,6 +91,29 @@ def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = ENV_I
     return hp
 
 
+#: hyperparameters that may be given as a linear schedule ``lin_<initial value>`` (rl-baselines3-zoo's convention)
+SCHEDULED = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def schedules(kwargs: dict) -> dict:
+    """``kwargs`` with every :data:`SCHEDULED` value written ``lin_<x>`` replaced by SB3's schedule falling linearly
+    from ``x`` at the start of training to 0 at ``--timesteps`` (SB3 computes the progress from the model's step
+    count over the run's total, so a resumed run follows the same schedule as an uninterrupted one)."""
+    from stable_baselines3.common.utils import LinearSchedule
+
+    out = dict(kwargs)
+    for key in SCHEDULED:
+        value = out.get(key)
+        if isinstance(value, str):  # (YAML reads 3e-4, without a decimal point, as a string)
+            linear = value.startswith("lin_")
+            try:
+                x = float(value[4:] if linear else value)
+            except ValueError:
+                raise UsageError(f"hyperparameter {key}: expected a number or 'lin_<number>', got {value!r}") from None
+            out[key] = LinearSchedule(x, 0.0, 1.0) if linear else x
+    return out
+
+
 def recipe_overrides(hp: dict) -> list[str]:
     """The recipe's ``env`` mapping as ``--set`` strings ``section.key=value`` (values as YAML scalars)."""
     out = []
@@ -204,7 +227,7 @@ def train(args) -> Path:
     # held-out episodes in the same randomised conditions (one env; batched stays batched, one kite)
     eval_env = _vec_env(cfg, 1, args.seed + EVAL_SEED_OFFSET, bool(hp["normalize"]), gamma,
                         "batched" if kind == "batched" else "dummy", training=False)
-    kwargs = {k: v for k, v in hp.items() if k not in _META_KEYS}
+    kwargs = schedules({k: v for k, v in hp.items() if k not in _META_KEYS})
     Algo = _algo_class(args.algo)
     if latest is not None:
         steps, path = latest
