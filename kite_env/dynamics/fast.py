@@ -2,7 +2,7 @@
 
 :class:`SurrogateKites` holds the states of ``n`` independent kites (rows of ``(n, 5, 3)`` arrays: A, B, C, D, KCU
 in W) and advances all of them by one RK4 step of ``dynamics.dt_s``. The particle system is the one of the full
-model (:func:`kite_env.dynamics.kernels.particle_accelerations`, Sect. II.C, Eq. 10-13: masses, bridle lines, line
+model (:func:`kite_env.dynamics.kernels.particle_accelerations_into`, Sect. II.C, Eq. 10-13: masses, bridle lines, line
 drag, tip-pair dashpots, tether and tip constraints, projection after the step); only the wing differs:
 
 * full model (:class:`kite_env.dynamics.simulator.FlightSimulator`): the static FE wing solved once per step (Fig. 6),
@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from kite_env.dynamics.kernels import particle_accelerations, project_constraints
+from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, project_constraints
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.fsi import WingSolution
@@ -313,15 +313,16 @@ def _line_state_one(rk, vk, rest, k_c, c_c, T_out, l_out):
 
 @njit(**_JIT)
 def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd, line_diameter,
-                   tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha):
-    """:func:`particle_accelerations` of one kite with the wing reactions ``yk[:12]`` (F_b in K; the wing pulls
-    A-D with ``-F_b``)."""
+                   tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha, a, lam, work):
+    """:func:`particle_accelerations_into` of one kite with the wing reactions ``yk[:12]`` (F_b in K; the wing
+    pulls A-D with ``-F_b``) into ``a`` (5, 3) and ``lam`` (3,). The force is the wing's own (interpolation at
+    fraction 0 between two equal ends: no condensed-stiffness correction, the wing is evaluated at the stage)."""
     for i in range(4):
         for c in range(3):
             F0[i, c] = -yk[3 * i + c]
-    return particle_accelerations(rk, vk, wind5, F0, F0, 0.0, False, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd,
-                                  line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity,
-                                  alpha)
+    particle_accelerations_into(rk, vk, wind5, F0, F0, 0.0, True, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd,
+                                line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity,
+                                alpha, a, lam, work)
 
 
 @njit(**_JIT)
@@ -335,8 +336,8 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     at their states, with the mean wind and gust at their positions and times and the turbulent wind ``turb``
     (n, 6, 3) of the start of the step held (the Fourier sum of :class:`kite_env.wind.WindField` is the costliest
     part of a stage; over one step of 5 ms the kite moves ~0.1 m and the turbulence, of integral length ~100 m,
-    changes by ~1e-3 of its size). After the step: the projection onto the constraints, then ``X``, ``Y``, ``wind``, ``R`` at the
-    new states, ``tether`` the tether force at the start of the step [N], the bridle-line ``tension`` and ``length``
+    changes by ~1e-3 of its size). After the step: the projection onto the constraints, then ``X``, ``Y``,
+    ``wind``, ``R`` at the new states, ``tether`` the tether force at the start of the step [N], the bridle-line ``tension`` and ``length``
     (n, 4) and ``status`` (:data:`OK`; :data:`NON_FINITE`; :data:`OUTSIDE`: an input beyond ``[lo, hi]`` (30,)).
     """
     pos = np.empty((6, 3))
@@ -356,17 +357,18 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     vn = np.empty((5, 3))
     kv = np.empty((4, 5, 3))  # RK4 stage velocities (k_iv) and accelerations (k_ia)
     ka = np.empty((4, 5, 3))
+    lam = np.empty(3)
+    work = np.empty(_WORK)
     half = 0.5 * dt
     for k in range(r.shape[0]):
         if not active[k]:
             continue
         r0, v0 = r[k], v[k]
-        a1, lam = _accelerations(r0, v0, wind[k], Y[k], F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                                 line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k],
-                                 gravity, alpha)
+        _accelerations(r0, v0, wind[k], Y[k], F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
+                       line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity, alpha,
+                       ka[0], lam, work)
         tether[k] = -lam[0] * tether_length
         kv[0] = v0
-        ka[0] = a1
         for st in range(1, 4):
             # stages 2, 3 at t + dt/2 from (kv, ka) of the stage before; stage 4 at t + dt
             h = half if st < 3 else dt
@@ -378,10 +380,9 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
             kite_inputs(t[k] + h, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
                         amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf, turb[k], True)
             mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, h2, ys)
-            a_st, _ = _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                                     line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k],
-                                     gravity, alpha)
-            ka[st] = a_st
+            _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
+                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity,
+                           alpha, ka[st], lam, work)
         ok = True
         for i in range(5):
             for c in range(3):

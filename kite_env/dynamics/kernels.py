@@ -23,7 +23,9 @@ Backend selection is done by :class:`kite_env.dynamics.simulator.FlightSimulator
 (correct, slow).
 
 Implementation rules (as :mod:`kite_env.structure.kernels`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
-no array views, scalar indexing only. ``error_model="numpy"``: a division by zero (a degenerate geometry, a line of
+scalar indexing only; no array views except the fixed slices of the caller's work array in
+:func:`particle_accelerations_into` (views allocate nothing; the intermediate arrays of the right-hand side were
+about a third of its cost). ``error_model="numpy"``: a division by zero (a degenerate geometry, a line of
 zero length) gives ``inf``/``nan`` as in the reference, which the simulator then reports as a non-finite state,
 instead of raising ``ZeroDivisionError``.
 """
@@ -45,7 +47,28 @@ _A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
 @njit(**_JIT)
 def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho, line_cd,
                            line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha):
-    """Constrained accelerations of A, B, C, D, KCU and the constraint multipliers (``FlightSimulator._rhs``).
+    """Constrained accelerations of A, B, C, D, KCU and the constraint multipliers (``FlightSimulator._rhs``):
+    :func:`particle_accelerations_into` with new arrays. Returns ``(a, lam)``."""
+    a = np.empty((5, 3))
+    lam = np.empty(3)
+    particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
+                                line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
+                                gravity, alpha, a, lam, np.empty(_WORK))
+    return a, lam
+
+
+#: length of the work array of :func:`particle_accelerations_into` (R 9, f_K 12, dq 12, f 15, e 12, l 4, T 4, fp 12,
+#: minv 5)
+_WORK = 85
+
+
+@njit(**_JIT)
+def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
+                                line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
+                                gravity, alpha, a, lam, work):
+    """Constrained accelerations of A, B, C, D, KCU into ``a`` (5, 3) and the constraint multipliers into ``lam``
+    (3,), with the intermediate arrays in ``work`` (:data:`_WORK`,) (no allocation: the fast fidelity calls this
+    16 times per kite and environment step).
 
     Parameters
     ----------
@@ -80,12 +103,20 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     gravity, alpha : float [m/s^2], [1/s]
         Gravity and the Baumgarte rate of the constraints.
 
-    Returns
-    -------
-    a : (5, 3) float [m/s^2]
-    lam : (3,) float
+    a : (5, 3) float [m/s^2], output
+    lam : (3,) float, output
         Lagrange multipliers of the tether, A-B and C-D constraints (``M a = f + G^T lam``).
+    work : (85,) float, scratch
     """
+    R = work[0:9].reshape((3, 3))  # views into work (no allocation)
+    f_K = work[9:21].reshape((4, 3))
+    dq = work[21:33]
+    f = work[33:48].reshape((5, 3))
+    e = work[48:60].reshape((4, 3))
+    l = work[60:64]
+    T = work[64:68]
+    fp = work[68:80].reshape((4, 3))
+    minv = work[80:85]
     # ---------------------------------------------------------------- frame K from A-D (frames.kite_frame)
     ox = 0.5 * (r[_A, 0] + r[_C, 0])
     oy = 0.5 * (r[_A, 1] + r[_C, 1])
@@ -105,13 +136,12 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     z0 = x1 * y2 - x2 * y1
     z1 = x2 * y0 - x0 * y2
     z2 = x0 * y1 - x1 * y0
-    R = np.empty((3, 3))  # columns x_k, y_k, z_k in W
+    # R: columns x_k, y_k, z_k in W
     R[0, 0], R[1, 0], R[2, 0] = x0, x1, x2
     R[0, 1], R[1, 1], R[2, 1] = y0, y1, y2
     R[0, 2], R[1, 2], R[2, 2] = z0, z1, z2
 
     # ---------------------------------------------------------------- wing force on A-D in K, then in W
-    f_K = np.empty((4, 3))
     if interpolate:
         # corrector: the wing force interpolated in time between both ends of the step
         for i in range(4):
@@ -120,7 +150,6 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     else:
         # the step's solution corrected by the condensed stiffness for the move of the bridle points in K:
         # dq = (r_i - r_k) R - q_b_K, F_K = F0_K - K_b dq
-        dq = np.empty(12)
         for i in range(4):
             d0 = r[i, 0] - ox
             d1 = r[i, 1] - oy
@@ -136,17 +165,15 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
                 f_K[i, k] = F0_K[i, k] - acc
 
     # ---------------------------------------------------------------- applied forces (ParticleSystem.forces)
-    f = np.zeros((5, 3))
     for i in range(5):
-        f[i, 2] -= m[i] * gravity
+        f[i, 0] = 0.0
+        f[i, 1] = 0.0
+        f[i, 2] = 0.0 - m[i] * gravity
     for i in range(4):
         for j in range(3):  # f_wing = f_K R^T
             f[i, j] += f_K[i, 0] * R[j, 0] + f_K[i, 1] * R[j, 1] + f_K[i, 2] * R[j, 2]
 
     # bridle lines, Eq. (10): F_c = k_c (l - L) + c_c dl/dt >= 0 along the line from the KCU to the wing point
-    e = np.empty((4, 3))
-    l = np.empty(4)
-    T = np.empty(4)
     for i in range(4):
         li, e0, e1, e2, ldot = _line_geometry(r, v, i, _KCU)
         Ti = k_c * (li - rest[i]) + c_c * ldot
@@ -212,7 +239,6 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
 
     # relative damping between the wing points: dashpots c_ij along the pairs A-C, B-D, A-D, B-C (reference: all
     # -fp added to the first points of the pairs, then all +fp to the second points, as np.add.at)
-    fp = np.empty((4, 3))
     for q in range(4):
         i, j = pair_index(q)
         _, e0, e1, e2, pdot = _line_geometry(r, v, i, j)
@@ -233,9 +259,6 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
     # M a = f + G^T lam, G a = -dG/dt v - 2 alpha G v - alpha^2 g (Baumgarte), g = 1/2 (|d|^2 - L^2) for the tether
     # (d = r_KCU, ground station at the origin) and the tip beams A-B, C-D. The three constraints share no mass, so
     # S = G M^-1 G^T is diagonal and lam_c = rhs_c / S_cc (what np.linalg.solve returns for a diagonal S).
-    a = np.empty((5, 3))
-    lam = np.empty(3)
-    minv = np.empty(5)
     for i in range(5):
         minv[i] = 1.0 / m[i]
         for k in range(3):
@@ -275,7 +298,6 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
         a[j, 0] += minv[j] * (-d0 * lc)
         a[j, 1] += minv[j] * (-d1 * lc)
         a[j, 2] += minv[j] * (-d2 * lc)
-    return a, lam
 
 
 @njit(**_JIT)
