@@ -140,14 +140,16 @@ def read_monitor(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def plot_learning_curves(runs: list[Path], out_png: Path) -> list[str]:
-    """Evaluation returns vs training steps (mean and std over the evaluation episodes) and smoothed training
-    episode returns of each run; returns the runs that had neither file (warnings)."""
+    """Evaluation returns vs training steps (mean and std over the evaluation episodes), smoothed training
+    episode returns, and, where ``scripts/select_checkpoint.py`` was run, the checkpoints' validation returns with
+    the baseline's on the same episodes (``RUN_DIR/selection.json``) of each run; returns the runs that had none of
+    these files (warnings)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax_e, ax_t) = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    fig, (ax_e, ax_t, ax_v) = plt.subplots(1, 3, figsize=(16, 4), constrained_layout=True)
     missing = []
     for k, run in enumerate(runs):
         color = f"C{k % 10}"
@@ -168,12 +170,26 @@ def plot_learning_curves(runs: list[Path], out_png: Path) -> list[str]:
                 ax_t.plot(steps, ret, ".", color=color, alpha=0.15, ms=2)
                 ax_t.plot(steps[n - 1:], _moving_average(ret, n), color=color, label=f"{run.name} (mean of {n})")
             found = True
+        sel = run / "selection.json"
+        if sel.is_file():
+            d = json.loads(sel.read_text())
+            rows = [r for r in d["rows"] if r.get("steps") is not None]
+            base = [r for r in d["rows"] if r.get("checkpoint") == "baseline"]
+            lo, hi = d["validation_seeds"]
+            ax_v.plot([r["steps"] for r in rows], [r["mean_return"] for r in rows], "o-", color=color,
+                      label=f"{run.name} (seeds {lo}-{hi}); best {d['best_steps']:,}")
+            if base:
+                ax_v.axhline(base[0]["mean_return"], color=color, ls="--", lw=1,
+                             label=f"baseline on {run.name}'s seeds")
+            found = True
         if not found:
             missing.append(str(run))
     ax_e.set(xlabel="training steps", ylabel="episode return", title="evaluation (held-out seeds, deterministic)")
     ax_t.set(xlabel="training steps (cumulative episode lengths)", ylabel="episode return",
              title="training episodes (monitor.csv)")
-    for ax in (ax_e, ax_t):
+    ax_v.set(xlabel="training steps", ylabel="mean episode return",
+             title="checkpoint validation (select_checkpoint.py)")
+    for ax in (ax_e, ax_t, ax_v):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)

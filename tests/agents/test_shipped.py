@@ -15,8 +15,13 @@ SEEDS = range(2000, 2012)  # held out: training used seeds 0.. (kites) and 10,00
 #: the benchmark's held-out seeds (scripts/benchmark_agents.py, README table); checkpoints are chosen on 3000..
 #: (scripts/select_checkpoint.py), so these seeds took no part in training or in the choice of the shipped model
 BENCHMARK_SEEDS = range(1000, 1020)
-#: shipped agents that beat the paper's controller on return in the fast fidelity (README: trained agents)
+#: shipped agents that beat the paper's controller on return on BENCHMARK_SEEDS (README: trained agents; SAC does
+#: not: 134.4 against 144.7)
 BEATS_BASELINE = ("ppo",)
+#: a larger held-out set: the validation seeds of scripts/select_checkpoint.py are 3000-3049, so 3050-3199 took no
+#: part in training or in the choice of checkpoint either (150 episodes: a return difference of ~15 is ~2 standard
+#: errors of the paired difference, where 20 episodes resolve only ~60)
+LARGE_SEEDS = range(3050, 3200)
 
 
 def _conditions() -> list[str]:
@@ -59,6 +64,22 @@ def test_shipped_agent_beats_the_baseline_on_held_out_seeds(name):
     base = np.array(_returns("baseline", "surrogate", BENCHMARK_SEEDS))
     assert agent.mean() > base.mean(), (agent.mean(), base.mean())
     assert np.sum(agent >= base - 1.0) >= 15, np.round(agent - base, 1)
+
+
+@pytest.fixture(scope="module")
+def baseline_large():
+    return np.array(_returns("baseline", "surrogate", LARGE_SEEDS))
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_agent_beats_the_baseline_on_150_held_out_episodes(name, baseline_large):
+    """Every shipped agent: higher mean return than the paper's controller over 150 held-out episodes of the
+    training conditions (paired: the same wind, turbulence and start), by more than one standard error of the
+    paired difference, and at least as good in most episodes."""
+    d = np.array(_returns(name, "surrogate", LARGE_SEEDS)) - baseline_large
+    se = d.std() / np.sqrt(d.size)
+    assert d.mean() > se > 0, (d.mean(), se)
+    assert np.mean(d >= -1.0) > 0.6, np.mean(d >= -1.0)
 
 
 @pytest.mark.parametrize("name", SHIPPED)
