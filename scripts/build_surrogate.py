@@ -4,7 +4,8 @@
 
 1. ``scripts/sample_wing.py``: flights of the full model (policies baseline, random, constant 0 / 0.5 / -0.5 at
    winds 4, 5, 6, 8, 10 m/s; random start, initial speed 18-26 m/s, turbulence intensity up to 0.1) with static
-   perturbations around every ``--perturb-every``-th stored state -> ``OUT/samples.npz``;
+   perturbations around every ``--perturb-every``-th stored state -> ``OUT/samples.npz`` (with ``--sample-seeds
+   0,1,2`` one such run per seed, merged with distinct episodes: more flights for the same recipe);
 2. ``scripts/train_surrogate.py`` for each of ``--sizes`` (held-out episodes: every 5th) -> ``OUT/<kite>_h64x64.npz``;
 3. the start table of the reset (:func:`kite_env.surrogate.start.build_start_table`) -> ``OUT/<kite>_start.npz``;
 4. the shipped pair ``OUT/package/<kite>.npz`` (the first size whose bridle-force RMS error is below
@@ -33,6 +34,16 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 REQUIRED_REL = 0.03  # issue 5: reaction-force RMS error under 3 % of the mean traction on held-out samples
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(t) for t in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+    if len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"repeated seed in {text!r} (the runs would be the same flights)")
+    return seeds
 
 
 def _run(cmd: list[str], log: Path) -> float:
@@ -69,6 +80,8 @@ def main(argv=None) -> int:
     p.add_argument("--perturb", type=int, default=1)
     p.add_argument("--perturb-every", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sample-seeds", type=_seeds, default=None,
+                   help="sampling runs, one per seed, merged (comma-separated; default: --seed only)")
     p.add_argument("--sizes", default="64,64;128,128", help="hidden layer sizes to fit, ';'-separated")
     p.add_argument("--epochs", type=int, default=400)
     p.add_argument("--batch", type=int, default=256)
@@ -98,13 +111,23 @@ def main(argv=None) -> int:
     py, walls = sys.executable, {}
     sets = [a for s in args.set for a in ("--set", s)]
 
-    # 1. samples of the full model
+    # 1. samples of the full model: one sampling run per seed of --sample-seeds, merged
     samples = out / "samples.npz"
-    walls["sampling"] = _run([py, "scripts/sample_wing.py", "--out", str(samples), "--policies", args.policies,
-                              "--winds", args.winds, "--episodes", str(args.episodes), "--duration",
-                              str(args.duration), "--every", str(args.every), "--perturb", str(args.perturb),
-                              "--perturb-every", str(args.perturb_every), "--seed", str(args.seed), *sets],
-                             out / "sample_wing.log")
+    seeds = [args.seed] if args.sample_seeds is None else args.sample_seeds
+    runs = []
+    walls["sampling"] = 0.0
+    for sd in seeds:
+        part = samples if len(seeds) == 1 else out / f"samples_seed{sd}.npz"
+        walls["sampling"] += _run([py, "scripts/sample_wing.py", "--out", str(part), "--policies", args.policies,
+                                   "--winds", args.winds, "--episodes", str(args.episodes), "--duration",
+                                   str(args.duration), "--every", str(args.every), "--perturb", str(args.perturb),
+                                   "--perturb-every", str(args.perturb_every), "--seed", str(sd), *sets],
+                                  out / f"sample_wing_seed{sd}.log")
+        runs.append(part)
+    if len(seeds) > 1:
+        from kite_env.surrogate.samples import WingSamples
+
+        WingSamples.merge([WingSamples.load(p) for p in runs]).save(samples)
 
     # 2. fits
     fits = {}

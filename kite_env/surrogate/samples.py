@@ -105,6 +105,22 @@ class WingSamples:
                    np.concatenate([p.origin for p in parts]), np.concatenate([p.group for p in parts]),
                    dict(meta or {}))
 
+    @classmethod
+    def merge(cls, parts: list["WingSamples"]) -> "WingSamples":
+        """The samples of separate sampling runs as one set: episode labels renumbered so that every run's
+        episodes stay distinct (the hold-out split is by episode); meta: the first run's, with every run's under
+        ``runs`` and the total ``n_samples`` and ``episodes``."""
+        if not parts:
+            raise ValueError("nothing to merge")
+        shifted, offset = [], 0
+        for p in parts:
+            shifted.append(cls(p.inputs, p.outputs, p.origin, p.group + offset, p.meta))
+            offset += int(p.group.max()) + 1 if p.group.size else 0
+        meta = dict(parts[0].meta)
+        meta.update({"runs": [p.meta for p in parts], "n_samples": int(sum(len(p.inputs) for p in parts)),
+                     "episodes": offset})
+        return cls.concatenate(shifted, meta)
+
 
 class StateSampler:
     """Environment recorder (``env.recorder``) that solves the wing statically at visited states and around them.

@@ -119,6 +119,20 @@ def test_samples_save_load_and_layout_check(tmp_path):
         WingSamples.load(tmp_path / "bad.npz")
 
 
+def test_samples_of_separate_runs_merge_with_distinct_episodes():
+    """Merged sampling runs (build_surrogate --sample-seeds) keep every run's episodes apart: run 2's episode 0 is
+    not run 1's episode 0 (the hold-out split is by episode)."""
+    a = WingSamples(np.zeros((3, 30)), np.zeros((3, 17)), np.array([0, 1, 0]), np.array([0, 0, 1]), {"seed": 0})
+    b = WingSamples(np.ones((2, 30)), np.ones((2, 17)), np.array([0, 0]), np.array([0, 2]), {"seed": 1})
+    m = WingSamples.merge([a, b])
+    assert list(m.group) == [0, 0, 1, 2, 4] and list(m.origin) == [0, 1, 0, 0, 0]
+    np.testing.assert_array_equal(m.inputs[3:], b.inputs)
+    assert m.meta["seed"] == 0 and [r["seed"] for r in m.meta["runs"]] == [0, 1]
+    assert m.meta["n_samples"] == 5 and m.meta["episodes"] == 5
+    with pytest.raises(ValueError, match="nothing to merge"):
+        WingSamples.merge([])
+
+
 def _linear_model(A, c, x_mean, x_std):
     """A one-layer SurrogateWing y = A x_n + c with unit output normalisation (an analytic check of predict)."""
     return SurrogateWing([A.T.copy()], [c.copy()], x_mean, x_std, np.zeros(17), np.ones(17),
