@@ -132,7 +132,7 @@ class FlightRecorder:
 
     def log(self, termination_reason: str | None, control_dt_s: float) -> FlightLog:
         """The episode's log; ``termination_reason`` None or "time limit" means completed."""
-        crashed = termination_reason not in (None, "time limit")
+        crashed = is_crash(termination_reason)
         series = {k: np.stack(v) for k, v in self.rows.items()}
         sim, mesh, design = self.sim, self.sim.wing.mesh, self.design
         meta = {
@@ -144,6 +144,11 @@ class FlightRecorder:
             "warmup_s": self.cfg.sim.warmup_s,
         }
         return FlightLog(series=series, meta=meta, snapshots=dict(self.snapshots))
+
+
+def is_crash(termination_reason: str | None) -> bool:
+    """Whether an episode that ended with ``termination_reason`` crashed (anything but no end or the time limit)."""
+    return termination_reason not in (None, "time limit")
 
 
 def evaluation_config(cfg: Config, duration_s: float | None = None, randomize: bool = False) -> Config:

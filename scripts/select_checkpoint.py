@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import re
 import shutil
 import sys
 from pathlib import Path
@@ -31,33 +30,25 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-_CKPT = re.compile(r"model_(\d+)_steps\.zip$")
-
 
 def checkpoints(run: Path) -> list[tuple[int, Path, Path]]:
-    """(steps, model zip, vecnormalize pkl) of every complete checkpoint of ``run``, by steps."""
-    out = []
-    for p in (run / "checkpoints").glob("model_*_steps.zip"):
-        m = _CKPT.search(p.name)
-        if m is None:
-            continue
-        n = int(m.group(1))
-        vn = p.with_name(f"model_vecnormalize_{n}_steps.pkl")
-        if vn.is_file():
-            out.append((n, p, vn))
-    return sorted(out)
+    """(steps, model zip, vecnormalize pkl) of every checkpoint of ``run`` saved with its normalisation, by steps."""
+    from kite_env.cli.train import checkpoints as saved
+
+    return [(n, p, p.with_name(f"model_vecnormalize_{n}_steps.pkl")) for n, p in saved(run / "checkpoints")
+            if p.with_name(f"model_vecnormalize_{n}_steps.pkl").is_file()]
 
 
 def validate(env, agent, seeds) -> dict:
     """Mean/std return, mean flight time and crashes of ``agent`` over one episode per seed."""
-    from kite_env.flight import run_episode
+    from kite_env.flight import is_crash, run_episode
 
     rets, times, crashes = [], [], 0
     for s in seeds:
         _, info = run_episode(env, agent, seed=int(s), record=False)
         rets.append(info["episode_return"])
         times.append(info["episode_steps"] * env.control_dt)
-        crashes += info["termination_reason"] not in (None, "time limit")
+        crashes += is_crash(info["termination_reason"])
     return {"mean_return": float(np.mean(rets)), "std_return": float(np.std(rets)),
             "flight_time_mean_s": float(np.mean(times)), "crashes": int(crashes), "episodes": len(seeds)}
 
@@ -88,7 +79,7 @@ def main(argv=None) -> int:
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
     cfg = load_config(cfg_path)
-    # the run's environment, episodes of the evaluation length (its randomised draws, its start rule)
+    # the run's environment as it trained: its randomised draws, its start rule, its episode length
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, randomize=True))
     env = KiteFigureEightEnv(config=cfg)
     seeds = range(args.seed, args.seed + args.episodes)

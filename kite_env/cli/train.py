@@ -175,13 +175,19 @@ def _vec_env_kind(requested: str | None, fidelity: str, n_envs: int) -> str:
     return requested
 
 
-def _latest_checkpoint(ckpt_dir: Path):
-    best = None
+def checkpoints(ckpt_dir: Path) -> list[tuple[int, Path]]:
+    """(steps, path) of every ``model_<steps>_steps.zip`` in ``ckpt_dir``, by steps."""
+    out = []
     for f in ckpt_dir.glob("model_*_steps.zip"):
         m = re.fullmatch(r"model_(\d+)_steps\.zip", f.name)
-        if m and (best is None or int(m.group(1)) > best[0]):
-            best = (int(m.group(1)), f)
-    return best
+        if m:
+            out.append((int(m.group(1)), f))
+    return sorted(out)
+
+
+def _latest_checkpoint(ckpt_dir: Path):
+    found = checkpoints(ckpt_dir)
+    return found[-1] if found else None
 
 
 def _algo_class(algo: str):

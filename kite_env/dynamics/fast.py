@@ -337,8 +337,9 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     (n, 6, 3) of the start of the step held (the Fourier sum of :class:`kite_env.wind.WindField` is the costliest
     part of a stage; over one step of 5 ms the kite moves ~0.1 m and the turbulence, of integral length ~100 m,
     changes by ~1e-3 of its size). After the step: the projection onto the constraints, then ``X``, ``Y``,
-    ``wind``, ``R`` at the new states, ``tether`` the tether force at the start of the step [N], the bridle-line ``tension`` and ``length``
-    (n, 4) and ``status`` (:data:`OK`; :data:`NON_FINITE`; :data:`OUTSIDE`: an input beyond ``[lo, hi]`` (30,)).
+    ``wind``, ``R`` at the new states, ``tether`` the tether force at the start of the step [N], the bridle-line
+    ``tension`` and ``length`` (n, 4) and ``status`` (:data:`OK`; :data:`NON_FINITE`; :data:`OUTSIDE`: an input
+    beyond ``[lo, hi]`` (30,)).
     """
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
