@@ -1,6 +1,7 @@
 """Regenerate the reduced-order wing of a kite from scratch: samples -> two fitted sizes -> start table -> files.
 
-    python scripts/build_surrogate.py --out-dir runs/surrogate [--quick] [--install] [--set SECTION.KEY=VALUE ...]
+    python scripts/build_surrogate.py --out-dir runs/surrogate [--sample-seeds 0,1,2] [--jobs 2] [--quick] [--install]
+        [--set SECTION.KEY=VALUE ...]
 
 1. ``scripts/sample_wing.py``: flights of the full model (policies baseline, random, constant 0 / 0.5 / -0.5 at
    winds 4, 5, 6, 8, 10 m/s; random start, initial speed 18-26 m/s, turbulence intensity up to 0.1) with static
@@ -61,6 +62,36 @@ def _run(cmd: list[str], log: Path) -> float:
     return time.perf_counter() - t0
 
 
+def _run_parallel(jobs: list[tuple[list[str], Path]], n: int) -> float:
+    """Run independent stages, at most ``n`` at a time, each writing only to its log; returns the wall time [s].
+
+    With ``n == 1`` they run one after another with their output on the terminal, as :func:`_run`."""
+    t0 = time.perf_counter()
+    if n <= 1:
+        for cmd, log in jobs:
+            _run(cmd, log)
+        return time.perf_counter() - t0
+    pending, running, failed = list(jobs), [], []
+    while pending or running:
+        while pending and len(running) < n:
+            cmd, log = pending.pop(0)
+            print(f"\n$ {shlex.join(cmd)}  (output: {log})", flush=True)
+            f = open(log, "w")
+            running.append((subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, text=True, cwd=ROOT), f, cmd,
+                            log))
+        time.sleep(0.5)
+        for job in [j for j in running if j[0].poll() is not None]:
+            running.remove(job)
+            job[1].close()
+            print(f"done ({job[0].returncode}) after {time.perf_counter() - t0:.0f} s: {job[3]}", flush=True)
+            if job[0].returncode != 0:
+                failed.append(job)
+    if failed:
+        raise SystemExit("build_surrogate: stage failed: "
+                         + "; ".join(f"{shlex.join(c)} ({p.returncode}, log: {lg})" for p, _, c, lg in failed))
+    return time.perf_counter() - t0
+
+
 def _grid(spec: str) -> np.ndarray:
     lo, hi, step = (float(v) for v in spec.split(":"))
     return np.round(np.arange(lo, hi + 0.5 * step, step), 10)
@@ -82,6 +113,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sample-seeds", type=_seeds, default=None,
                    help="sampling runs, one per seed, merged (comma-separated; default: --seed only)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="sampling runs and fits to run at once, one process each (default 1: in turn, output shown)")
     p.add_argument("--sizes", default="64,64;128,128", help="hidden layer sizes to fit, ';'-separated")
     p.add_argument("--epochs", type=int, default=400)
     p.add_argument("--batch", type=int, default=256)
@@ -92,6 +125,8 @@ def main(argv=None) -> int:
     p.add_argument("--w-grid", default="-14:4:0.5", help="start table: normal apparent velocity lo:hi:step [m/s]")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     args = p.parse_args(argv)
+    if args.jobs < 1:
+        p.error(f"--jobs must be at least 1, got {args.jobs}")
     if args.quick:
         args.policies, args.winds, args.episodes, args.duration = "baseline,constant:0.5", "6", 3, 0.3
         args.perturb_every, args.sizes, args.epochs = 4, "16;32", 30
@@ -114,30 +149,27 @@ def main(argv=None) -> int:
     # 1. samples of the full model: one sampling run per seed of --sample-seeds, merged
     samples = out / "samples.npz"
     seeds = [args.seed] if args.sample_seeds is None else args.sample_seeds
-    runs = []
-    walls["sampling"] = 0.0
-    for sd in seeds:
-        part = samples if len(seeds) == 1 else out / f"samples_seed{sd}.npz"
-        walls["sampling"] += _run([py, "scripts/sample_wing.py", "--out", str(part), "--policies", args.policies,
-                                   "--winds", args.winds, "--episodes", str(args.episodes), "--duration",
-                                   str(args.duration), "--every", str(args.every), "--perturb", str(args.perturb),
-                                   "--perturb-every", str(args.perturb_every), "--seed", str(sd), *sets],
-                                  out / f"sample_wing_seed{sd}.log")
-        runs.append(part)
+    runs = [samples if len(seeds) == 1 else out / f"samples_seed{sd}.npz" for sd in seeds]
+    walls["sampling"] = _run_parallel(
+        [([py, "scripts/sample_wing.py", "--out", str(part), "--policies", args.policies, "--winds", args.winds,
+           "--episodes", str(args.episodes), "--duration", str(args.duration), "--every", str(args.every),
+           "--perturb", str(args.perturb), "--perturb-every", str(args.perturb_every), "--seed", str(sd), *sets],
+          out / f"sample_wing_seed{sd}.log") for sd, part in zip(seeds, runs)], args.jobs)
     if len(seeds) > 1:
         from kite_env.surrogate.samples import WingSamples
 
         WingSamples.merge([WingSamples.load(p) for p in runs]).save(samples)
 
     # 2. fits
-    fits = {}
+    fits, paths = {}, {}
     for size in args.sizes.split(";"):
-        tag = "h" + size.replace(",", "x")
-        path = out / f"{kite}_{tag}.npz"
-        walls[f"train {size}"] = _run([py, "scripts/train_surrogate.py", "--samples", str(samples), "--out",
-                                       str(path), "--hidden", size, "--epochs", str(args.epochs), "--batch",
-                                       str(args.batch), "--patience", str(args.patience), "--seed", str(args.seed)],
-                                      out / f"train_{tag}.log")
+        paths[size] = out / f"{kite}_h{size.replace(',', 'x')}.npz"
+    walls["fits"] = _run_parallel(
+        [([py, "scripts/train_surrogate.py", "--samples", str(samples), "--out", str(path), "--hidden", size,
+           "--epochs", str(args.epochs), "--batch", str(args.batch), "--patience", str(args.patience), "--seed",
+           str(args.seed)], out / f"train_{path.stem.rsplit('_', 1)[1]}.log") for size, path in paths.items()],
+        args.jobs)
+    for size, path in paths.items():
         fits[size] = (path, SurrogateWing.load(path))
 
     # 3. start table
