@@ -3,10 +3,8 @@ model, learning curves from kite-train run folders."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,16 +12,12 @@ import yaml
 
 import kite_env.plots
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "benchmark_agents.py"
 ZOO_HEADER = "| algo | env_id | mean_reward | std_reward | n_timesteps | eval_episodes |"
 
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("benchmark_agents", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def bench(load_script):
+    return load_script("benchmark_agents")
 
 
 def test_tiny_benchmark_writes_the_zoo_table(bench, tmp_path, monkeypatch, capsys):
