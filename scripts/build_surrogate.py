@@ -161,16 +161,14 @@ def main(argv=None) -> int:
         WingSamples.merge([WingSamples.load(p) for p in runs]).save(samples)
 
     # 2. fits
-    fits, paths = {}, {}
-    for size in args.sizes.split(";"):
-        paths[size] = out / f"{kite}_h{size.replace(',', 'x')}.npz"
+    tags = {size: "h" + size.replace(",", "x") for size in args.sizes.split(";")}
     walls["fits"] = _run_parallel(
-        [([py, "scripts/train_surrogate.py", "--samples", str(samples), "--out", str(path), "--hidden", size,
-           "--epochs", str(args.epochs), "--batch", str(args.batch), "--patience", str(args.patience), "--seed",
-           str(args.seed)], out / f"train_{path.stem.rsplit('_', 1)[1]}.log") for size, path in paths.items()],
+        [([py, "scripts/train_surrogate.py", "--samples", str(samples), "--out", str(out / f"{kite}_{tag}.npz"),
+           "--hidden", size, "--epochs", str(args.epochs), "--batch", str(args.batch), "--patience",
+           str(args.patience), "--seed", str(args.seed)], out / f"train_{tag}.log") for size, tag in tags.items()],
         args.jobs)
-    for size, path in paths.items():
-        fits[size] = (path, SurrogateWing.load(path))
+    fits = {size: (out / f"{kite}_{tag}.npz", SurrogateWing.load(out / f"{kite}_{tag}.npz"))
+            for size, tag in tags.items()}
 
     # 3. start table
     t0 = time.perf_counter()

@@ -35,10 +35,10 @@ sys.path.insert(0, str(ROOT))
 
 def checkpoints(run: Path) -> list[tuple[int, Path, Path]]:
     """(steps, model zip, vecnormalize pkl) of every checkpoint of ``run`` saved with its normalisation, by steps."""
-    from kite_env.cli.train import checkpoints as saved
+    from kite_env.cli.train import checkpoint_vecnormalize, checkpoints as saved
 
-    return [(n, p, p.with_name(f"model_vecnormalize_{n}_steps.pkl")) for n, p in saved(run / "checkpoints")
-            if p.with_name(f"model_vecnormalize_{n}_steps.pkl").is_file()]
+    found = [(n, p, checkpoint_vecnormalize(p.parent, n)) for n, p in saved(run / "checkpoints")]
+    return [c for c in found if c[2].is_file()]
 
 
 def validate(env, agent, seeds) -> dict:

@@ -185,6 +185,11 @@ def checkpoints(ckpt_dir: Path) -> list[tuple[int, Path]]:
     return sorted(out)
 
 
+def checkpoint_vecnormalize(ckpt_dir: Path, steps: int) -> Path:
+    """The normalisation statistics saved with the checkpoint of ``steps`` (SB3 CheckpointCallback's name)."""
+    return ckpt_dir / f"model_vecnormalize_{steps}_steps.pkl"
+
+
 def _latest_checkpoint(ckpt_dir: Path):
     found = checkpoints(ckpt_dir)
     return found[-1] if found else None
@@ -238,7 +243,7 @@ def train(args) -> Path:
     if latest is not None:
         steps, path = latest
         model = Algo.load(path, env=venv, device="cpu", tensorboard_log=str(out / "tb"))
-        vn = ckpt_dir / f"model_vecnormalize_{steps}_steps.pkl"
+        vn = checkpoint_vecnormalize(ckpt_dir, steps)
         if hp["normalize"] and vn.is_file():
             from stable_baselines3.common.vec_env import VecNormalize
 
@@ -275,7 +280,7 @@ def train(args) -> Path:
         n = int(model.num_timesteps)
         model.save(ckpt_dir / f"model_{n}_steps.zip")
         if hp["normalize"]:
-            venv.save(str(ckpt_dir / f"model_vecnormalize_{n}_steps.pkl"))
+            venv.save(str(checkpoint_vecnormalize(ckpt_dir, n)))
         if args.algo == "sac":
             model.save_replay_buffer(ckpt_dir / f"model_replay_buffer_{n}_steps.pkl")
         print(f"kite-train: {tag}: checkpoint at {n} steps in {ckpt_dir}", file=sys.stderr)
