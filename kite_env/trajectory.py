@@ -370,6 +370,7 @@ class Lemniscate:
         # periodic trapezoid rule: spectrally accurate for the smooth periodic speed |dp/ds|
         s_q = np.linspace(0.0, _TWO_PI, 4096, endpoint=False)
         self.length = float(np.mean(np.linalg.norm(self.derivatives(s_q)[1], axis=-1)) * _TWO_PI)
+        self._cells: dict[tuple[float, int], np.ndarray] = {}  # parameter_of_fraction's admissible cells
 
     # ------------------------------------------------------------------ curve
     def derivatives(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -389,6 +390,28 @@ class Lemniscate:
         """Signed geodesic curvature [1/rad] = ``p . (p' × p'') / |p'|^3``; > 0 for a left turn."""
         p, dp, ddp = self.derivatives(s)
         return np.sum(p * np.cross(dp, ddp), axis=-1) / np.linalg.norm(dp, axis=-1) ** 3
+
+    def parameter_of_fraction(self, u: float, curvature_max: float = math.inf, n_cells: int = 4096) -> float:
+        """The path parameter [rad] at the fraction ``u`` in [0, 1) of the parameter range where the geodesic curvature
+        satisfies ``|kappa_g| <= curvature_max`` [1/rad]: ``u`` uniform gives ``s`` uniform over that set (resolved
+        on ``n_cells`` equal cells of [0, 2 pi), each in or out by its midpoint). Without a bound, ``2 pi u``.
+        Raises ValueError when no cell qualifies."""
+        if not math.isfinite(curvature_max):
+            return _TWO_PI * u
+        key = (float(curvature_max), int(n_cells))
+        cells = self._cells.get(key)
+        if cells is None:
+            ds = _TWO_PI / n_cells
+            mid = (np.arange(n_cells) + 0.5) * ds
+            cells = np.flatnonzero(np.abs(self.geodesic_curvature(mid)) <= curvature_max)
+            if cells.size == 0:
+                kmin = float(np.min(np.abs(self.geodesic_curvature(mid))))
+                raise ValueError(f"no point of the figure-eight has |geodesic curvature| <= {curvature_max} 1/rad "
+                                 f"(the smallest is {kmin:.3g})")
+            self._cells[key] = cells
+        x = u * cells.size
+        j = min(int(x), cells.size - 1)
+        return float((cells[j] + (x - j)) * (_TWO_PI / n_cells))
 
     def period_estimate(self, speed_mps: float, tether_length_m: float) -> float:
         """Time [s] for one figure at constant flight speed [m/s] on a tether of the given length [m]."""

@@ -252,3 +252,29 @@ def test_heading_of_one_vector_equals_the_vectorised_formula():
     np.testing.assert_allclose(one, heading_angle(r, v), rtol=0, atol=1e-14)
     assert one[1] == pytest.approx(np.pi)
     assert isinstance(heading_angle(r[2], v[2]), float)
+
+
+def test_parameter_of_fraction_draws_uniformly_from_the_straight_parts(lem):
+    u = np.random.default_rng(3).random(4000)
+    # unbounded: 2 pi u, bit for bit (the env's unbounded start draw is unchanged by the option)
+    assert all(lem.parameter_of_fraction(x) == 2.0 * math.pi * x for x in u[:50])
+    s = np.array([lem.parameter_of_fraction(x, 1.0) for x in u])
+    k = np.abs(lem.geodesic_curvature(s))
+    ds = 2.0 * math.pi / 4096
+    assert k.max() <= 1.0 + 0.5 * ds * np.abs(np.gradient(lem.geodesic_curvature(s), s)).max() + 1e-9
+    grid = np.linspace(0.0, 2.0 * math.pi, 200_000, endpoint=False)
+    share = np.mean(np.abs(lem.geodesic_curvature(grid)) <= 1.0)
+    assert 0.2 < share < 0.6  # a real restriction, not the whole path or a point
+    # uniform over the admissible set: each admissible half (around the crossing at s = 0 and at s = pi) gets
+    # half of the draws, and the draws are spread over the set like the set itself (two-sample KS distance)
+    near_pi = np.abs(s - math.pi) < 0.5 * math.pi
+    assert abs(near_pi.mean() - 0.5) < 0.04
+    ref = np.sort(grid[np.abs(lem.geodesic_curvature(grid)) <= 1.0])
+    ss = np.sort(s)
+    cdf_s = np.arange(1, ss.size + 1) / ss.size
+    cdf_ref = np.searchsorted(ref, ss, side="right") / ref.size
+    assert np.max(np.abs(cdf_s - cdf_ref)) < 1.36 / math.sqrt(ss.size) + 0.005
+    # a monotone map: a larger fraction is a later admissible parameter
+    assert np.all(np.diff([lem.parameter_of_fraction(x, 1.0) for x in np.linspace(0.0, 0.999, 100)]) > 0)
+    with pytest.raises(ValueError, match="no point of the figure-eight"):
+        lem.parameter_of_fraction(0.5, 1e-9)

@@ -129,7 +129,8 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Starting State
 
-    The KCU at the crossing of the figure-eight (or a uniformly drawn path point with ``env.random_start``), flying
+    The KCU at the crossing of the figure-eight (or, with ``env.random_start``, a path point drawn uniformly in the
+    path parameter among those whose geodesic curvature is at most ``env.start_curvature_max`` in magnitude), flying
     along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]``; the wing in
     static aeroelastic equilibrium on its bridle. Wind speed, turbulence intensity and turbulence realisation are drawn
     from ``self.np_random`` (ranges in the ``env`` section). With ``env.randomize = false`` nothing is drawn: the
@@ -171,6 +172,11 @@ class KiteFigureEightEnv(gym.Env):
         self.cfg = cfg
         self.render_mode = render_mode
         self.path = Lemniscate(cfg.trajectory)
+        if cfg.env.random_start:
+            try:
+                self.path.parameter_of_fraction(0.0, cfg.env.start_curvature_max)
+            except ValueError as exc:
+                raise ValueError(f"config key 'env.start_curvature_max': {exc}") from None
         self.layout = observation_layout(cfg.env.observation)
         lo = np.concatenate([np.full(_TERM_SPECS[t][0], _TERM_SPECS[t][1]) for t in self.layout]).astype(np.float32)
         hi = np.concatenate([np.full(_TERM_SPECS[t][0], _TERM_SPECS[t][2]) for t in self.layout]).astype(np.float32)
@@ -210,7 +216,9 @@ class KiteFigureEightEnv(gym.Env):
                 ti = (float(rng.uniform(0.0, env.turbulence_intensity_max)) if env.turbulence_intensity_max > 0
                       else 0.0)
                 wind_seed = int(rng.integers(0, 2**31 - 1))
-                s0 = float(rng.uniform(0.0, 2.0 * math.pi)) if env.random_start else 0.0
+                # one uniform draw either way (2 pi u is the unbounded draw, bit for bit as uniform(0, 2 pi))
+                s0 = (self.path.parameter_of_fraction(float(rng.uniform(0.0, 1.0)), env.start_curvature_max)
+                      if env.random_start else 0.0)
                 v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
             else:  # the configured conditions (kite-eval): nothing drawn
                 wind_speed, ti = self.cfg.wind.speed_mps, self.cfg.wind.turbulence_intensity

@@ -155,6 +155,36 @@ def test_bad_env_config_is_one_clear_error():
         KiteFigureEightEnv(overrides=["env.wind_speed_min_mps=9", "env.wind_speed_max_mps=4"])
     with pytest.raises(ConfigError, match="unknown config key 'env.nope'"):
         KiteFigureEightEnv(overrides=["env.nope=1"])
+    for bad in ("0", "nan", "-inf"):
+        with pytest.raises(ConfigError, match="env.start_curvature_max"):
+            KiteFigureEightEnv(overrides=[f"env.start_curvature_max={bad}"])
+    assert KiteFigureEightEnv(overrides=["env.start_curvature_max=inf"]).cfg.env.start_curvature_max == math.inf
+    with pytest.raises(ValueError, match="env.start_curvature_max.*no point of the figure-eight"):
+        KiteFigureEightEnv(overrides=["env.random_start=true", "env.start_curvature_max=1e-9"])
+
+
+def test_random_starts_on_the_straight_parts_draw_the_same_conditions():
+    """``env.start_curvature_max`` moves the start point only: the same seed draws the same wind, turbulence and
+    start speed, and the start lies where the path's curvature is within the bound."""
+    over = ["env.wind_speed_min_mps=4", "env.wind_speed_max_mps=10", "env.turbulence_intensity_max=0.15",
+            "env.random_start=true", "env.initial_speed_min_mps=18", "env.initial_speed_max_mps=26",
+            "sim.fidelity=surrogate"]
+    free, straight = KiteFigureEightEnv(overrides=over), KiteFigureEightEnv(
+        overrides=[*over, "env.start_curvature_max=1.0"])
+    curv = []
+    for seed in range(6):
+        _, a = free.reset(seed=seed)
+        _, b = straight.reset(seed=seed)
+        for key in ("wind_speed_mps", "turbulence_intensity", "wind_seed", "initial_speed_mps"):
+            assert a[key] == b[key]
+        # one uniform draw u: 2 pi u without the bound, the same u mapped onto the straight parts with it
+        assert b["start_s"] == pytest.approx(straight.path.parameter_of_fraction(a["start_s"] / (2 * math.pi), 1.0),
+                                             rel=1e-12)
+        curv.append(abs(float(straight.path.geodesic_curvature(b["start_s"]))))
+        # the start point is on the path at the drawn parameter
+        np.testing.assert_allclose(straight.rec.state.r[4] / np.linalg.norm(straight.rec.state.r[4]),
+                                   straight.path.point(b["start_s"]), atol=1e-6)
+    assert max(curv) <= 1.0 + 1e-3
 
 
 def test_observation_terms_are_configurable():
