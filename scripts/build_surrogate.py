@@ -1,7 +1,7 @@
 """Regenerate the reduced-order wing of a kite from scratch: samples -> two fitted sizes -> start table -> files.
 
     python scripts/build_surrogate.py --out-dir runs/surrogate [--sample-seeds 0,1,2] [--jobs 2] [--quick] [--install]
-        [--set SECTION.KEY=VALUE ...]
+        [--reuse-samples] [--set SECTION.KEY=VALUE ...]
 
 1. ``scripts/sample_wing.py``: flights of the full model (policies baseline, random, constant 0 / 0.5 / -0.5 at
    winds 4, 5, 6, 8, 10 m/s; random start, initial speed 18-26 m/s, turbulence intensity up to 0.1) with static
@@ -92,6 +92,25 @@ def _run_parallel(jobs: list[tuple[list[str], Path]], n: int) -> float:
     return time.perf_counter() - t0
 
 
+def reusable(path: Path, args, seed: int) -> bool:
+    """Whether the sampling run ``path`` exists and was made with the sampling settings of ``args`` at ``seed``
+    (``--reuse-samples``); a file made with other settings is an error naming the first difference (the sampling
+    is deterministic, so a matching file is the run this command would make)."""
+    if not path.is_file():
+        return False
+    from kite_env.surrogate.samples import WingSamples
+
+    meta = WingSamples.load(path).meta
+    want = {"policies": [s for s in args.policies.split(",") if s],
+            "winds_mps": [float(w) for w in args.winds.split(",")], "every": args.every, "perturb": args.perturb, "perturb_every": args.perturb_every,
+            "duration_s": args.duration, "seed": seed, "overrides": list(args.set)}
+    for key, value in want.items():
+        if meta.get(key) != value:
+            raise SystemExit(f"build_surrogate: --reuse-samples: '{path}' was sampled with {key} = {meta.get(key)!r}, "
+                             f"this command samples {value!r}")
+    return True
+
+
 def _grid(spec: str) -> np.ndarray:
     lo, hi, step = (float(v) for v in spec.split(":"))
     return np.round(np.arange(lo, hi + 0.5 * step, step), 10)
@@ -113,6 +132,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sample-seeds", type=_seeds, default=None,
                    help="sampling runs, one per seed, merged (comma-separated; default: --seed only)")
+    p.add_argument("--reuse-samples", action="store_true",
+                   help="keep a sampling run already in --out-dir made with the same settings and seed (else error)")
     p.add_argument("--jobs", type=int, default=1,
                    help="sampling runs and fits to run at once, one process each (default 1: in turn, output shown)")
     p.add_argument("--sizes", default="64,64;128,128", help="hidden layer sizes to fit, ';'-separated")
@@ -150,11 +171,15 @@ def main(argv=None) -> int:
     samples = out / "samples.npz"
     seeds = [args.seed] if args.sample_seeds is None else args.sample_seeds
     runs = [samples if len(seeds) == 1 else out / f"samples_seed{sd}.npz" for sd in seeds]
+    todo = [(sd, part) for sd, part in zip(seeds, runs) if not (args.reuse_samples and reusable(part, args, sd))]
+    for sd, part in zip(seeds, runs):
+        if (sd, part) not in todo:
+            print(f"reusing {part} (seed {sd}, same sampling settings)")
     walls["sampling"] = _run_parallel(
         [([py, "scripts/sample_wing.py", "--out", str(part), "--policies", args.policies, "--winds", args.winds,
            "--episodes", str(args.episodes), "--duration", str(args.duration), "--every", str(args.every),
            "--perturb", str(args.perturb), "--perturb-every", str(args.perturb_every), "--seed", str(sd), *sets],
-          out / f"sample_wing_seed{sd}.log") for sd, part in zip(seeds, runs)], args.jobs)
+          out / f"sample_wing_seed{sd}.log") for sd, part in todo], args.jobs)
     if len(seeds) > 1:
         from kite_env.surrogate.samples import WingSamples
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
+import numpy as np
 import pytest
 
 
@@ -38,3 +40,22 @@ def test_jobs_below_one_is_refused(build, capsys):
     with pytest.raises(SystemExit) as e:
         build.main(["--out-dir", "unused", "--jobs", "0"])
     assert e.value.code == 2 and "--jobs must be at least 1" in capsys.readouterr().err
+
+
+def test_reuse_samples_keeps_a_matching_run_and_refuses_a_different_one(build, tmp_path):
+    from kite_env.surrogate.samples import WingSamples
+
+    args = argparse.Namespace(
+        policies="baseline,constant:0", winds="4,6.5", every=2, perturb=1, perturb_every=10, duration=6.0,
+        set=["env.start_curvature_max=1.0"])
+    meta = {"policies": ["baseline", "constant:0"], "winds_mps": [4.0, 6.5], "every": 2, "perturb": 1,
+            "perturb_every": 10, "duration_s": 6.0, "seed": 3, "overrides": ["env.start_curvature_max=1.0"]}
+    path = tmp_path / "samples_seed3.npz"
+    assert not build.reusable(path, args, 3)  # nothing there yet: sample it
+    WingSamples(np.zeros((2, 30)), np.zeros((2, 17)), np.zeros(2, int), np.zeros(2, int), meta).save(path)
+    assert build.reusable(path, args, 3)
+    with pytest.raises(SystemExit, match=r"sampled with seed = 3, this command samples 4"):
+        build.reusable(path, args, 4)
+    args.winds = "4,7"
+    with pytest.raises(SystemExit, match=r"winds_mps = \[4.0, 6.5\], this command samples \[4.0, 7.0\]"):
+        build.reusable(path, args, 3)
