@@ -102,8 +102,9 @@ def reusable(path: Path, args, seed: int) -> bool:
 
     meta = WingSamples.load(path).meta
     want = {"policies": [s for s in args.policies.split(",") if s],
-            "winds_mps": [float(w) for w in args.winds.split(",")], "every": args.every, "perturb": args.perturb, "perturb_every": args.perturb_every,
-            "duration_s": args.duration, "seed": seed, "overrides": list(args.set)}
+            "winds_mps": [float(w) for w in args.winds.split(",")], "every": args.every, "perturb": args.perturb,
+            "perturb_every": args.perturb_every, "duration_s": args.duration, "seed": seed,
+            "overrides": list(args.set)}
     for key, value in want.items():
         if meta.get(key) != value:
             raise SystemExit(f"build_surrogate: --reuse-samples: '{path}' was sampled with {key} = {meta.get(key)!r}, "
@@ -171,10 +172,12 @@ def main(argv=None) -> int:
     samples = out / "samples.npz"
     seeds = [args.seed] if args.sample_seeds is None else args.sample_seeds
     runs = [samples if len(seeds) == 1 else out / f"samples_seed{sd}.npz" for sd in seeds]
-    todo = [(sd, part) for sd, part in zip(seeds, runs) if not (args.reuse_samples and reusable(part, args, sd))]
+    todo = []
     for sd, part in zip(seeds, runs):
-        if (sd, part) not in todo:
+        if args.reuse_samples and reusable(part, args, sd):
             print(f"reusing {part} (seed {sd}, same sampling settings)")
+        else:
+            todo.append((sd, part))
     walls["sampling"] = _run_parallel(
         [([py, "scripts/sample_wing.py", "--out", str(part), "--policies", args.policies, "--winds", args.winds,
            "--episodes", str(args.episodes), "--duration", str(args.duration), "--every", str(args.every),

@@ -77,6 +77,7 @@ def main(argv=None) -> int:
         p.error(f"'{args.ship}' exists (use --force to replace it)")
 
     from agents.policies import load_model_agent, make_agent
+    from kite_env.cli.train import checkpoint_vecnormalize
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
@@ -110,7 +111,7 @@ def main(argv=None) -> int:
         tmp.mkdir(parents=True)
         ckpt = args.run / best["model"]
         shutil.copy(ckpt, tmp / "model.zip")
-        shutil.copy(ckpt.with_name(f"model_vecnormalize_{best['steps']}_steps.pkl"), tmp / "vecnormalize.pkl")
+        shutil.copy(checkpoint_vecnormalize(ckpt.parent, best["steps"]), tmp / "vecnormalize.pkl")
         for name in ("config.yml", "args.yml", "command.txt", "selection.json"):
             if (args.run / name).is_file():
                 shutil.copy(args.run / name, tmp / name)
