@@ -62,6 +62,13 @@ class AeroConfig:
     # point / chord (from the airfoil nose) that Breukels' regression CM is taken about: 0.25 (quarter chord) is the
     # convention of the open VSM codes, not confirmed for Breukels (aero/breukels.py); 0 = about the nose
     cm_regression_ref_over_c: float = 0.25  # [-]
+    # damping of the wing's deformation velocity: "consistent" = each section's quasi-steady force response to its
+    # own translation velocity, spread over its nodes (symmetric part positive semi-definite; fsi.SectionDamping);
+    # "eq3" = Eq. (3) as printed (mean LE/TE finite-difference velocity in the inflow): indefinite, unstable
+    damping: str = "consistent"
+    # point of each section where the frame's rotation omega x r enters the inflow (Eq. 2): "le_node" = the paper's
+    # LE node; "three_quarter_chord" = the 3/4-chord point (Pistolesi's rotation-rate collocation point)
+    rotation_point: str = "le_node"
 
 
 @dataclass(frozen=True)
@@ -102,6 +109,9 @@ class DynamicsConfig:
     dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
     baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
+    # the wing's mass on A-D: "distributed" = Table 1's total over the FE nodes (70 % on the LE tube), condensed onto
+    # A-D with the wing's static modes (dynamics/wing_mass.py); "points" = the paper's four point masses
+    wing_mass: str = "distributed"
 
 
 @dataclass(frozen=True)
@@ -131,6 +141,12 @@ class SimConfig:
 
 #: wing models of the flight simulation (sim.fidelity)
 FIDELITIES = ("fe", "surrogate")
+#: aero.damping choices (fsi.SectionDamping; "eq3" is the paper's Eq. 3 as printed)
+AERO_DAMPING = ("consistent", "eq3")
+#: aero.rotation_point choices (aero.sections.apparent_wind): the paper's LE node, or the 3/4-chord point
+ROTATION_POINTS = ("le_node", "three_quarter_chord")
+#: dynamics.wing_mass choices (kite_env.dynamics.wing_mass)
+WING_MASS = ("distributed", "points")
 
 #: observation terms of the Gymnasium environment (kite_env.envs), in the order they are stacked
 OBSERVATION_TERMS = ("position", "heading", "line_forces", "path", "rates", "actuator")
@@ -299,6 +315,11 @@ def _validate(cfg: Config) -> None:
     if not 0.0 <= cfg.aero.cm_regression_ref_over_c <= 1.0:
         raise ConfigError("config key 'aero.cm_regression_ref_over_c' must lie in [0, 1], "
                           f"got {cfg.aero.cm_regression_ref_over_c}")
+    if cfg.aero.damping not in AERO_DAMPING:
+        raise ConfigError(f"config key 'aero.damping' must be one of {', '.join(AERO_DAMPING)}, got {cfg.aero.damping!r}")
+    if cfg.aero.rotation_point not in ROTATION_POINTS:
+        raise ConfigError(f"config key 'aero.rotation_point' must be one of {', '.join(ROTATION_POINTS)}, "
+                          f"got {cfg.aero.rotation_point!r}")
     if cfg.sim.fidelity not in FIDELITIES:
         raise ConfigError(f"config key 'sim.fidelity' must be one of {', '.join(FIDELITIES)}, got {cfg.sim.fidelity!r}")
     if cfg.sim.surrogate_start not in ("table", "fe", "table_only"):
@@ -307,6 +328,9 @@ def _validate(cfg: Config) -> None:
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")
+    if cfg.dynamics.wing_mass not in WING_MASS:
+        raise ConfigError(f"config key 'dynamics.wing_mass' must be one of {', '.join(WING_MASS)}, "
+                          f"got {cfg.dynamics.wing_mass!r}")
     if cfg.control.beta_min > 1.0:
         raise ConfigError(f"config key 'control.beta_min' must lie in [0, 1], got {cfg.control.beta_min}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:

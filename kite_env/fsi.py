@@ -24,12 +24,13 @@ Failure to converge raises :class:`WingConvergenceError` with the coupling histo
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from kite_env.aero.loads import load_jacobian, section_loads, wing_totals
+from kite_env.aero.loads import load_jacobian, section_damping, section_loads, wing_totals
 from kite_env.config import Config
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteMesh
 from kite_env.structure import rotations, tube
@@ -171,6 +172,8 @@ class AeroelasticWing:
         self._load_dofs = (6 * mesh.sections[:, :, None] + np.arange(3)).ravel()
         self.state = self.unloaded_state()
         self._sec_prev: np.ndarray | None = None  # section node positions at the previous time step (Eq. 3)
+        self._cm_ref: float | None = None  # C_M reference point during a cold start's continuation
+        self._C_damp: np.ndarray | None = None  # (n_sec, 3, 3) section damping of the current time step [N s/m]
         self._step_prev: tuple | None = None  # (state, dt) before the last committed time step (predictor)
         self._kb_cache: tuple | None = None  # (factorisation count, bridle stiffness)
         self._damped = False  # retry mode of the monolithic solve (StaticSolver.solve_damped)
@@ -256,14 +259,65 @@ class AeroelasticWing:
         collapsed[tb] = col
         return collapsed
 
+    #: points (/chord) the regression CM is stepped through from a cold start (``_cm_continuation``)
+    CM_CONTINUATION_START = 0.25
+    CM_CONTINUATION_STEP = 0.05
+
+    def _cm_continuation(self, state, q_b, flight, dt, support, ramp, history, step, method):
+        """A cold solve with Breukels' C_M taken about a point ahead of the quarter chord (``aero.
+        cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation: the load ramp with the C_M about
+        the quarter chord, then the point moved forward in steps of 0.05 c, each converged. From the unloaded wing
+        directly it fails: there the mid sections sit at alpha of about 0.3 deg, where the centre of pressure of
+        a nose-referenced C_M lies far ahead of the nose and pushes the aft canopy to the pressure side. Only the path
+        to the equilibrium changes. Returns the state to start the final solve from."""
+        target = self.cfg.aero.cm_regression_ref_over_c
+        if target >= self.CM_CONTINUATION_START:
+            return state
+        n = int(np.ceil((self.CM_CONTINUATION_START - target) / self.CM_CONTINUATION_STEP - 1e-9))
+        points = self.CM_CONTINUATION_START - self.CM_CONTINUATION_STEP * np.arange(n)
+        for cm_ref in points:
+            self._cm_ref = float(cm_ref)
+            state, _ = self._attempts(state, state.x[self.bridle].copy(), q_b, 1, False, flight, dt, support,
+                                      ramp[-1], history, step, method)
+        return state
+
+    def _aero_options(self) -> dict:
+        """Keyword arguments of :func:`kite_env.aero.loads.section_loads` from ``cfg.aero``."""
+        a = self.cfg.aero
+        return dict(moment_chord_power=a.moment_chord_power, luffing_cl=a.luffing_cl,
+                    cm_regression_ref_over_c=a.cm_regression_ref_over_c if self._cm_ref is None else self._cm_ref,
+                    rotation_point_over_c=0.75 if a.rotation_point == "three_quarter_chord" else None)
+
+    def _eq3(self, dt: float | None) -> bool:
+        """The paper's Eq. (3) as printed: the deformation velocity enters the section inflow."""
+        return bool(dt) and self.cfg.aero.damping == "eq3"
+
     def _aero(self, state: NodalState, flight: FlightState, dt: float | None):
+        """Section loads at ``state`` (Eq. 2-9); in a time step with ``aero.damping = "consistent"`` plus the nodal
+        damping forces of :meth:`_prepare_damping`, ``f_ij = -(C_i / m) (x_ij - x_ij,prev) / dt``: each section's
+        quasi-steady force response to its own translation velocity (:func:`kite_env.aero.loads.section_damping`),
+        shared equally by its ``m`` nodes, each with its backward-Euler velocity in K."""
         sec = self.mesh.sections
-        return section_loads(
-            state.x[sec], self.mesh.section_tube_d, self.mesh.section_width,
-            flight.v_kite, flight.omega, flight.v_wind, self.cfg.aero.rho_kg_m3,
-            x_sec_prev=self._sec_prev if dt else None, dt=dt, moment_chord_power=self.cfg.aero.moment_chord_power,
-            luffing_cl=self.cfg.aero.luffing_cl, cm_regression_ref_over_c=self.cfg.aero.cm_regression_ref_over_c,
-        )
+        x = state.x[sec]
+        loads = section_loads(
+            x, self.mesh.section_tube_d, self.mesh.section_width, flight.v_kite, flight.omega, flight.v_wind,
+            self.cfg.aero.rho_kg_m3, x_sec_prev=self._sec_prev if self._eq3(dt) else None, dt=dt if self._eq3(dt) else None,
+            **self._aero_options())
+        if dt and self._C_damp is not None:
+            m = sec.shape[1]
+            f_d = np.einsum("ikl,ijl->ijk", self._C_damp, x - self._sec_prev) * (-1.0 / (m * dt))
+            loads = dataclasses.replace(loads, nodal_forces=loads.nodal_forces + f_d)
+        return loads
+
+    def _prepare_damping(self, flight: FlightState, dt: float | None) -> None:
+        """Section damping matrices of a time step (``aero.damping = "consistent"``), at the previous committed shape
+        and the step's flight state, held over the step's Newton solve (so the damping force is linear in the node
+        positions and its tangent ``C / (m dt)`` exact). None for static solves and for Eq. (3)."""
+        self._C_damp = None
+        if dt and self.cfg.aero.damping == "consistent" and self._sec_prev is not None:
+            self._C_damp = section_damping(
+                self._sec_prev, self.mesh.section_tube_d, self.mesh.section_width, flight.v_kite, flight.omega,
+                flight.v_wind, self.cfg.aero.rho_kg_m3, **self._aero_options())
 
     def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
         return np.bincount(self._load_dofs, weights=scale * loads.nodal_forces.ravel(), minlength=self.n_dof)
@@ -295,6 +349,7 @@ class AeroelasticWing:
             ramp = list(np.arange(1, n + 1) / n)
         history: list[dict] = []
         sol = None
+        self._prepare_damping(flight, dt)
         # large moves of the bridle points are applied in sub-steps of at most fsi.max_bridle_step_m, each one
         # converged, so that the coupling always starts close to the solution (a large jump can carry the
         # flexible tips onto a collapsed branch)
@@ -304,8 +359,16 @@ class AeroelasticWing:
             move = float(np.max(np.abs((q_b - q_start)[:, [0, 2]])))
         n_sub = max(1, int(np.ceil(move / self.cfg.fsi.max_bridle_step_m)))
         step = self._monolithic if method == "monolithic" else self._couple
-        for scale in ramp[:-1]:
-            state, sol = step(state, q_b, flight, dt, support, scale, history)
+        cold = not (warm and self.state is not None)
+        if cold and self.cfg.aero.cm_regression_ref_over_c < self.CM_CONTINUATION_START:
+            self._cm_ref = self.CM_CONTINUATION_START  # the load ramp with C_M about c/4 (_cm_continuation)
+        try:
+            for scale in ramp[:-1]:
+                state, sol = step(state, q_b, flight, dt, support, scale, history)
+            if cold:
+                state = self._cm_continuation(state, q_b, flight, dt, support, ramp, history, step, method)
+        finally:
+            self._cm_ref = None
         start = state
         try:
             state, sol = self._attempts(start, q_start, q_b, n_sub, predicted, flight, dt, support, ramp[-1], history,
@@ -568,10 +631,16 @@ class _AeroLoad:
 
     def tangent(self, state: NodalState) -> np.ndarray:
         w, fl = self.wing, self.flight
+        eq3 = w._eq3(self.dt)
         _, J = load_jacobian(
             state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
-            w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if self.dt else None, dt=self.dt,
-            moment_chord_power=w.cfg.aero.moment_chord_power, luffing_cl=w.cfg.aero.luffing_cl,
-            cm_regression_ref_over_c=w.cfg.aero.cm_regression_ref_over_c)
+            w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if eq3 else None, dt=self.dt if eq3 else None,
+            **w._aero_options())
+        if self.dt and w._C_damp is not None:
+            # nodal damping forces -(C_i / m) (x_ij - x_ij,prev) / dt: a block -C_i / (m dt) on each node's diagonal
+            n_sec, m = w.mesh.sections.shape
+            Jr = J.reshape(n_sec, m, 3, m, 3)
+            idx = np.arange(m)
+            Jr[:, idx, :, idx, :] -= (w._C_damp / (m * self.dt))[None, :, :, :]
         self.n_tangent += 1
         return self.asm.block_data(-self.scale * J)

@@ -43,6 +43,45 @@ about the airfoil nose). The regression moment is transferred from that point to
 of the reference point is nose-down), before the blend; the flat-plate moment is already about ``x_ref``. The
 section's line of action, hence the nodal loads, then do not depend on the chosen reference point.
 
+Negative angle of attack (``negative_alpha="bounded"``, the default). Fitted to lifting sections, the regression
+gives CL = -0.80 at -5 deg and -1.54 at -10 deg (t = 0.1, kappa = 0.095) and an even, nose-down CM (-0.63 at -10
+deg). Data for the TU Delft V3 LEI kite:
+
+* 2-D CFD section polars, OpenSourceAWE/V3Kite.jl ``data/2D_polars_CFD_NF_combined/<i>.csv`` (columns alpha [deg],
+  Cl, Cd, Cm; commit d8c4376d), median over the inboard profiles i = 1..16 (17-19: tip): at alpha = 0, -2, -3, -4,
+  -5, -6, -8, -10 deg Cl = 0.181, -0.058, -0.165, -0.270, -0.348, -0.362, -0.434, -0.553 (profile 10: -0.31 at -5,
+  -0.52 at -10 deg; profiles 1..16 range -0.63..-0.25 at -5 deg), Cd = 0.039, 0.053, 0.059, 0.072, 0.081, 0.091,
+  0.107, 0.123, and Cm - Cm(0) = 0, +0.045, +0.063, +0.080, +0.090, then +0.090 (the files hold Cm constant below
+  about -6 deg; quarter chord, the polar format's convention).
+* Rigid 3-D wind-tunnel model, Re 5e5, awegroup/TUDELFT_V3_KITE
+  ``data/aerodynamic/3D/WindTunnel_Re5e5_alpha_sweep_beta_0_Poland2025.csv`` (columns alpha, CL, CD; commit
+  e021aa9): CL = -0.001, -0.214, -0.280 and CD = 0.049, 0.069, 0.098 at alpha = -2.0, -6.1, -11.6 deg (its CMy is a
+  whole-wing moment about the model's reference point, not used).
+
+The law follows the 2-D CFD, a section coefficient like the regression (itself fitted to 2-D RANS); the wind-tunnel
+values are whole-wing coefficients with the finite-span loss (lift slope 0.09/deg, 2-D CFD 0.16/deg, regression
+0.19/deg), which the strips of this model would otherwise get at negative alpha only. Wind tunnel / law is 0.55 and
+0.50 at -6.1 and -11.6 deg, as at +5.4 deg (0.55). Beyond -10 deg the rigid CFD section keeps losing lift (-0.82 at
+-15 deg); a membrane canopy cannot hold a reversed pressure difference (LE tube plus luffing canopy), so the law
+saturates. With ``a`` in degrees and the regression with its tangent-line continuation ``CL_P, CD_P, CM_P``::
+
+    w  = s((A_S - a) / (A_S - A_E))      smoothstep s, A_S = ALPHA_NEG_START_DEG = 0, A_E = ALPHA_NEG_END_DEG = -3
+    CL = (1 - w) CL_P + w CL_NEG_SAT tanh((a - A_Z) / W)                 CL_NEG_SAT = 0.6, A_Z = -1 deg, W = 6.5 deg
+    CD = CD_P + w CD_NEG_ADD tanh((A_S - a) / W)                         CD_NEG_ADD = 0.05
+    CM = (1 - w) CM_P + w (CM_P(0) + CM_NEG_ADD tanh((A_S - a) / W_M))   CM_NEG_ADD = 0.09, W_M = 3 deg
+
+(``A_Z`` ALPHA_NEG_ZL_DEG, ``W`` ALPHA_NEG_WIDTH_DEG, ``W_M`` ALPHA_NEG_CM_WIDTH_DEG), then the moment transfer and
+the flat-plate blend above. A fixed start at 0 deg keeps alpha >= 0 bit for bit, lies just above the regression's
+zero-lift angle (-0.2..-1.1 deg for kappa = 0..0.15) and needs no root of the cubic in the kernel; the data's
+zero-lift angle (-1.5 deg CFD, -2 deg wind tunnel) is not reproduced (-0.7 deg here). The CL law is one curve
+without t or kappa: the regression's dependence is an extrapolation there and one kite's profiles cannot support a
+fitted one. The CD and CM increments ride on the regression's own (t, kappa)-dependent values. For t = 0.1, kappa
+= 0.08: CL = -0.26, -0.33, -0.53, CD = 0.074, 0.082, 0.122 at -4, -5, -10 deg (CL within 0.05 of the CFD median from
+-4 to -10 deg, CD within 0.007 from -2 to -10 deg), CL = -0.60 at -20 deg. w is C1 at 0 and -3 deg, so the
+coefficients stay C1 over the whole range; CL is non-decreasing in alpha on [-20, 0] deg for 0.04 <= t <= 0.25,
+0 <= kappa <= 0.16 (tested; the regression turns at -13..-18 deg), and returns from -0.60 at -20 deg to the flat
+plate's -0.43 at -30 deg. ``negative_alpha="breukels"`` keeps the regression (the open codes' behaviour).
+
 Cost: one small matrix product for the 8 polynomial coefficients plus ~40 element-wise array operations; no
 derivatives are formed (the structural solver keeps the aerodynamic loads fixed inside its Newton loop, Sect. II.A).
 """
@@ -59,6 +98,23 @@ ALPHA_FP_MIN_DEG = 30.0
 X_REF_OVER_C_DEFAULT = 0.25
 #: Default point / chord the regression CM is taken about (quarter chord, an assumption: module docstring).
 CM_REGRESSION_REF_DEFAULT = 0.25
+# Negative-alpha branch (module docstring): blend band [deg], CL law, CD and CM increments.
+#: Start (upper end) of the blend band to the negative-alpha law [deg].
+ALPHA_NEG_START_DEG = 0.0
+#: End of the blend band; below it the negative-alpha law alone [deg].
+ALPHA_NEG_END_DEG = -3.0
+#: Saturation |CL| of the negative-alpha law [-].
+CL_NEG_SAT = 0.6
+#: Zero-lift angle of the negative-alpha CL law [deg].
+ALPHA_NEG_ZL_DEG = -1.0
+#: Angle scale of the tanh in the CL law and the CD increment [deg].
+ALPHA_NEG_WIDTH_DEG = 6.5
+#: Drag increment of the luffing canopy at large negative alpha [-].
+CD_NEG_ADD = 0.05
+#: Nose-up CM increment at large negative alpha, over the regression CM at 0 deg [-].
+CM_NEG_ADD = 0.09
+#: Angle scale of the tanh in the CM increment [deg].
+ALPHA_NEG_CM_WIDTH_DEG = 3.0
 
 # Breukels' LEI airfoil constants C20..C62 (physics_facts.md 1.3; [S1], [S2], [S3] agree).
 C20, C21, C22 = -0.008011, -0.000336, 0.000992
@@ -147,11 +203,13 @@ def flat_plate_coefficients(alpha, x_ref_over_c=X_REF_OVER_C_DEFAULT):
     return cn * np.cos(alpha), np.abs(cn * s), -cn * (0.5 - x_ref_over_c)
 
 
-def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT, cm_ref_over_c=CM_REGRESSION_REF_DEFAULT):
+def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT, cm_ref_over_c=CM_REGRESSION_REF_DEFAULT,
+                     negative_alpha="bounded"):
     """Section lift, drag and pitching-moment coefficients of an LEI airfoil.
 
-    Breukels' regression for |alpha| <= 20 deg, C1 blend to the sign-correct flat-plate law over
-    20 deg < |alpha| < 30 deg, flat-plate law beyond (see the module docstring).
+    Breukels' regression for |alpha| <= 20 deg (below 0 deg blended into the bounded negative-alpha law unless
+    ``negative_alpha="breukels"``), C1 blend to the sign-correct flat-plate law over 20 deg < |alpha| < 30 deg,
+    flat-plate law beyond (see the module docstring).
 
     Parameters
     ----------
@@ -167,12 +225,17 @@ def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT, cm_ref_
         ``cm_ref_over_c`` to this point (module docstring).
     cm_ref_over_c : float [-]
         Point / chord (from the leading edge) the regression CM is taken about; default the quarter chord.
+    negative_alpha : {"bounded", "breukels"}
+        ``"bounded"``: below ``ALPHA_NEG_START_DEG`` blend into the negative-alpha law fitted to V3 data (module
+        docstring); ``"breukels"``: the regression at negative alpha as well (the former behaviour, bit for bit).
 
     Returns
     -------
     CL, CD, CM : arrays of the broadcast shape [-]
         CM positive nose-up.
     """
+    if negative_alpha not in ("bounded", "breukels"):
+        raise ValueError(f"negative_alpha must be 'bounded' or 'breukels', not {negative_alpha!r}")
     cm_ref = float(cm_ref_over_c)
     at_quarter_chord = np.ndim(x_ref_over_c) == 0 and float(x_ref_over_c) == cm_ref
     alpha, t, kappa, x_ref = np.broadcast_arrays(
@@ -189,6 +252,13 @@ def lei_coefficients(alpha, t, kappa, x_ref_over_c=X_REF_OVER_C_DEFAULT, cm_ref_
     cl = ((l5 * ac + l6) * ac + l7) * ac + l8 + ((3.0 * l5 * ac + 2.0 * l6) * ac + l7) * da
     cd = cd2 * ac * ac + cd0 + 2.0 * cd2 * ac * da
     cm = cm2 * ac * ac + cm0 + 2.0 * cm2 * ac * da
+    if negative_alpha == "bounded":
+        # blend below ALPHA_NEG_START_DEG into the negative-alpha law (w = 0 above: cl + 0 * (...) == cl)
+        w = _smoothstep((ALPHA_NEG_START_DEG - a) / (ALPHA_NEG_START_DEG - ALPHA_NEG_END_DEG))
+        if np.any(w > 0.0):
+            cl = cl + w * (CL_NEG_SAT * np.tanh((a - ALPHA_NEG_ZL_DEG) / ALPHA_NEG_WIDTH_DEG) - cl)
+            cd = cd + w * (CD_NEG_ADD * np.tanh((ALPHA_NEG_START_DEG - a) / ALPHA_NEG_WIDTH_DEG))
+            cm = cm + w * (cm0 + CM_NEG_ADD * np.tanh((ALPHA_NEG_START_DEG - a) / ALPHA_NEG_CM_WIDTH_DEG) - cm)
     if not at_quarter_chord:
         # regression CM is about cm_ref: move it to x_ref with the normal force C_N = CL cos a + CD sin a
         cm = cm + (x_ref.ravel() - cm_ref) * (cl * np.cos(a_rad) + cd * np.sin(a_rad))

@@ -53,6 +53,16 @@ _ALPHA_POLY_MAX_DEG = 20.0  # breukels.ALPHA_POLY_MAX_DEG
 _ALPHA_FP_MIN_DEG = 30.0  # breukels.ALPHA_FP_MIN_DEG
 _X_REF_DEFAULT = 0.25  # breukels.X_REF_OVER_C_DEFAULT (reference point of the regression CM)
 _RAD2DEG = 180.0 / math.pi  # np.rad2deg
+# negative-alpha branch: breukels.ALPHA_NEG_START_DEG, ALPHA_NEG_END_DEG, CL_NEG_SAT, ALPHA_NEG_ZL_DEG,
+# ALPHA_NEG_WIDTH_DEG, CD_NEG_ADD, CM_NEG_ADD, ALPHA_NEG_CM_WIDTH_DEG
+_ALPHA_NEG_START_DEG = 0.0
+_ALPHA_NEG_END_DEG = -3.0
+_CL_NEG_SAT = 0.6
+_ALPHA_NEG_ZL_DEG = -1.0
+_ALPHA_NEG_WIDTH_DEG = 6.5
+_CD_NEG_ADD = 0.05
+_CM_NEG_ADD = 0.09
+_ALPHA_NEG_CM_WIDTH_DEG = 3.0
 
 # Breukels' constants C20..C62 (breukels.py, physics_facts.md 1.3), grouped as the eight alpha-polynomial
 # coefficients, each a + b kappa + c kappa^2 with a, b, c quadratics in t (rows of breukels._COEF):
@@ -87,9 +97,9 @@ COEF = np.array(
 
 
 @njit(**_JIT)
-def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25):
-    """``breukels.lei_coefficients`` of one section: (CL, CD, CM) for alpha [rad], t, kappa, x_ref / c and the
-    point cm_ref / c the regression CM is taken about."""
+def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25, neg=1):
+    """``breukels.lei_coefficients`` of one section: (CL, CD, CM) for alpha [rad], t, kappa, x_ref / c, the
+    point cm_ref / c the regression CM is taken about and ``neg`` (1: ``negative_alpha="bounded"``, 0: "breukels")."""
     t2 = t * t
     k2 = kappa * kappa
     # poly_coefficients: lambda5..8, CD_2, CD_0, CM_2, CM_0 (alpha in degrees)
@@ -108,6 +118,15 @@ def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25):
     cl = ((l5 * ac + l6) * ac + l7) * ac + l8 + ((3.0 * l5 * ac + 2.0 * l6) * ac + l7) * da
     cd = cd2 * ac * ac + cd0 + 2.0 * cd2 * ac * da
     cm = cm2 * ac * ac + cm0 + 2.0 * cm2 * ac * da
+    if neg != 0:
+        # blend (smoothstep) below 0 deg into the bounded negative-alpha law
+        u = (_ALPHA_NEG_START_DEG - a) / (_ALPHA_NEG_START_DEG - _ALPHA_NEG_END_DEG)
+        u = min(max(u, 0.0), 1.0)
+        w = u * u * (3.0 - 2.0 * u)
+        if w > 0.0:
+            cl = cl + w * (_CL_NEG_SAT * math.tanh((a - _ALPHA_NEG_ZL_DEG) / _ALPHA_NEG_WIDTH_DEG) - cl)
+            cd = cd + w * (_CD_NEG_ADD * math.tanh((_ALPHA_NEG_START_DEG - a) / _ALPHA_NEG_WIDTH_DEG))
+            cm = cm + w * (cm0 + _CM_NEG_ADD * math.tanh((_ALPHA_NEG_START_DEG - a) / _ALPHA_NEG_CM_WIDTH_DEG) - cm)
     if x_ref != cm_ref:
         # regression CM is about cm_ref: transfer with C_N = CL cos a + CD sin a
         cm = cm + (x_ref - cm_ref) * (cl * math.cos(alpha) + cd * math.sin(alpha))
@@ -126,7 +145,7 @@ def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25):
 
 @njit(**_JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
-                         has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25):
+                         has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25, rot_x=-1.0):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
 
     Parameters
@@ -158,6 +177,9 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         TE nodes (``loads.distribute`` with ``canopy_share``).
     cm_ref : float [-]
         Point / chord (from the leading edge) the regression CM is taken about (``breukels.lei_coefficients``).
+    rot_x : float [-]
+        Point / chord (from the airfoil nose) where the frame rotation ``omega x r`` of Eq. (2) is taken; negative:
+        the LE node (the paper), ``sections.apparent_wind``.
 
     Outputs (written)
     -----------------
@@ -254,9 +276,13 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         mz *= inv_m
         # ---------------------------------------------------------------- apparent wind, Eq. (2)-(3)
         iw = i if nw > 1 else 0
-        va0 = (om1 * r2 - om2 * r1) + (vk0 - v_wind[iw, 0])
-        va1 = (om2 * r0 - om0 * r2) + (vk1 - v_wind[iw, 1])
-        va2 = (om0 * r1 - om1 * r0) + (vk2 - v_wind[iw, 2])
+        p0, p1, p2 = r0, r1, r2  # point of the rotation term: the LE node, or rot_x c from the nose along e_x
+        if rot_x >= 0.0:
+            sp = rot_x * c - 0.5 * d
+            p0, p1, p2 = r0 + sp * ex0, r1 + sp * ex1, r2 + sp * ex2
+        va0 = (om1 * p2 - om2 * p1) + (vk0 - v_wind[iw, 0])
+        va1 = (om2 * p0 - om0 * p2) + (vk1 - v_wind[iw, 1])
+        va2 = (om0 * p1 - om1 * p0) + (vk2 - v_wind[iw, 2])
         if has_prev:  # Eq. (3): mean of the LE and TE node finite-difference velocities
             va0 += ((x[i, m - 1, 0] - x_prev[i, m - 1, 0]) + (r0 - x_prev[i, 0, 0])) * inv_2dt
             va1 += ((x[i, m - 1, 1] - x_prev[i, m - 1, 1]) + (r1 - x_prev[i, 0, 1])) * inv_2dt
@@ -327,7 +353,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,
                          x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0, luffing_cl=0.0,
-                         cm_ref_over_c=0.25):
+                         cm_ref_over_c=0.25, rotation_point_over_c=None):
     """Fields of :class:`kite_env.aero.loads.SectionLoads` from the compiled kernel (same arguments as
     :func:`kite_env.aero.loads.section_loads`, Eq. 2-9).
 
@@ -343,6 +369,7 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
     x_ref_over_c : float [-]
     spanwise : (n_sec, 3) float, optional
     moment_chord_power, luffing_cl, cm_ref_over_c : float
+    rotation_point_over_c : float or None
 
     Returns
     -------
@@ -378,7 +405,8 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
                          np.ascontiguousarray(w), np.ascontiguousarray(v_kite, dtype=float),
                          np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c),
                          float(moment_chord_power), span,
-                         has_span, scal, vec, node, zeta, axes, float(luffing_cl), float(cm_ref_over_c))
+                         has_span, scal, vec, node, zeta, axes, float(luffing_cl), float(cm_ref_over_c),
+                         -1.0 if rotation_point_over_c is None else float(rotation_point_over_c))
     alpha, cl, cd, cm, moment, s_ref, q_dyn, chord, t, kappa = scal
     lift, drag, v_app = vec
     nodal, local = node

@@ -183,6 +183,7 @@ def section_loads(
     moment_chord_power: float = 2.0,
     luffing_cl: float = 0.0,
     cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
+    rotation_point_over_c: float | None = None,
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -226,6 +227,9 @@ def section_loads(
         Point / chord (from the airfoil leading edge) that Breukels' regression CM is taken about (default the
         quarter chord, an assumption: :mod:`kite_env.aero.breukels`). Unlike ``x_ref_over_c`` this changes the
         section's centre of pressure, hence the nodal loads.
+    rotation_point_over_c : float, optional [-]
+        Where the frame rotation enters Eq. (2): None = the LE node (the paper), else that point / chord from the
+        airfoil nose (:func:`kite_env.aero.sections.apparent_wind`; 0.75 = Pistolesi's 3/4-chord point).
 
     Returns
     -------
@@ -234,10 +238,10 @@ def section_loads(
     if resolve_backend(backend) == "numba":
         return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
                                                   x_ref_over_c, spanwise, moment_chord_power, luffing_cl,
-                                                  cm_regression_ref_over_c))
+                                                  cm_regression_ref_over_c, rotation_point_over_c))
     x_sec = np.asarray(x_sec, dtype=float)
     geom = section_geometry(x_sec, tube_d, spanwise)
-    v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt)
+    v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt, geom, rotation_point_over_c)
     c = geom.chord
     # flow u = -v_a in section components; its e_y component is dropped (projection onto the airfoil plane)
     u_loc, alpha = inflow(v_a, geom)
@@ -276,6 +280,7 @@ def load_jacobian(
     moment_chord_power: float = 2.0,
     luffing_cl: float = 0.0,
     cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
+    rotation_point_over_c: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
 
@@ -301,7 +306,8 @@ def load_jacobian(
     p = 3 * m
     base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c,
                          moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
-                         cm_regression_ref_over_c=cm_regression_ref_over_c)
+                         cm_regression_ref_over_c=cm_regression_ref_over_c,
+                         rotation_point_over_c=rotation_point_over_c)
     tan = spanwise_directions(x_sec[:, 0])
     # stack: copy q perturbs coordinate q (= 3 b + l) of every section
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
@@ -315,7 +321,7 @@ def load_jacobian(
         v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
         None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan),
         moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
-        cm_regression_ref_over_c=cm_regression_ref_over_c)
+        cm_regression_ref_over_c=cm_regression_ref_over_c, rotation_point_over_c=rotation_point_over_c)
     df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
     return base.nodal_forces, df.transpose(1, 2, 0).copy()
 
@@ -357,3 +363,57 @@ def wing_totals(loads: SectionLoads, v_ref: np.ndarray) -> dict:
         "lift_to_drag": lift / drag if drag > 0.0 else float("inf"),
         "moment": moment,
     }
+
+
+def section_damping(
+    x_sec: np.ndarray,
+    tube_d: np.ndarray,
+    width: np.ndarray,
+    v_kite: np.ndarray,
+    omega: np.ndarray,
+    v_wind: np.ndarray,
+    rho: float,
+    h: float = 1e-3,
+    **options,
+) -> np.ndarray:
+    """Quasi-steady aerodynamic damping of each rigid section: ``C_i = -d F_i / d u`` (n_sec, 3, 3) [N s/m].
+
+    ``F_i`` is the section's force (Eq. 7-8, lift + drag) and ``u`` a translation velocity of the whole section in K,
+    which adds to its apparent wind (Eq. 2; Eq. 3's intent: the deformation velocity changes the inflow). Central
+    differences of :func:`section_loads` in the wind (``u = +h e_k`` is the wind ``v_w - h e_k``), all six
+    perturbations of all sections in one stacked call. In lift/drag axes of the section plane the exact matrix is
+    ``(q c w / V) [[2 C_D, C_D' - C_L], [2 C_L, C_L' + C_D]]`` (rows and columns e_D, e_L; primes d/d alpha); the
+    spanwise velocity does not enter (the inflow is projected onto the airfoil plane).
+
+    The symmetric part is then projected onto the positive semi-definite cone (negative eigenvalues set to zero;
+    they occur past the lift maximum, where ``C_L' + C_D < 0``), the skew part is kept: the damping force
+    ``-C u`` then never feeds energy into the wing, ``u . C u = u . C_sym u >= 0``, and the skew (circulatory) part
+    does no work.
+
+    Parameters are those of :func:`section_loads` (``options``: its keyword arguments ``x_ref_over_c``,
+    ``moment_chord_power``, ``luffing_cl``, ``cm_regression_ref_over_c``, ``rotation_point_over_c``); ``h`` [m/s]
+    is the difference step. ``x_sec_prev`` / ``dt`` must not be given: the damping replaces Eq. (3).
+
+    Returns
+    -------
+    C : (n_sec, 3, 3) float [N s/m]
+        Section damping matrices in K components, symmetric part positive semi-definite.
+    """
+    if "x_sec_prev" in options or "dt" in options:
+        raise TypeError("section_damping: the damping replaces Eq. (3); x_sec_prev and dt are not accepted")
+    x_sec = np.asarray(x_sec, dtype=float)
+    n_sec, m, _ = x_sec.shape
+    v_w = np.broadcast_to(np.asarray(v_wind, dtype=float), (n_sec, 3))
+    du = np.concatenate((np.eye(3), -np.eye(3))) * h  # (6, 3): +h e_k, -h e_k
+    wind = (v_w[None, :, :] - du[:, None, :]).reshape(6 * n_sec, 3)
+    rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (6,) + np.shape(a)).reshape(
+        (6 * n_sec,) + np.shape(a)[1:]))
+    loads = section_loads(rep(x_sec), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
+                          v_kite, omega, wind, rho, spanwise=rep(spanwise_directions(x_sec[:, 0])), **options)
+    F = loads.nodal_forces.sum(axis=1).reshape(6, n_sec, 3)
+    dF_du = (F[:3] - F[3:]) / (2.0 * h)  # (k, n_sec, l): dF_l / du_k
+    C = -dF_du.transpose(1, 2, 0)  # C[i, l, k] = -dF_l / du_k
+    sym = 0.5 * (C + C.transpose(0, 2, 1))
+    lam, V = np.linalg.eigh(sym)
+    sym_psd = np.einsum("nij,nj,nkj->nik", V, np.maximum(lam, 0.0), V)
+    return sym_psd + 0.5 * (C - C.transpose(0, 2, 1))

@@ -213,6 +213,8 @@ def apparent_wind(
     v_wind: np.ndarray,
     x_sec_prev: np.ndarray | None = None,
     dt: float | None = None,
+    geometry: "SectionGeometry | None" = None,
+    rotation_point_over_c: float | None = None,
 ) -> np.ndarray:
     """Apparent wind velocity of every section, Eq. (2) with the deformation velocity of Eq. (3).
 
@@ -230,6 +232,14 @@ def apparent_wind(
         Section node positions at the previous time step; with ``dt`` enables Eq. (3).
     dt : float [s], optional
         Time step for Eq. (3).
+    geometry : SectionGeometry, optional
+        The sections' geometry; needed with ``rotation_point_over_c``.
+    rotation_point_over_c : float, optional [-]
+        None (the paper's Eq. 2): the frame rotation ``omega × r`` is taken at the LE node ``r_i1``. A value ``x_p``:
+        at the point ``x_p c`` behind the airfoil nose along ``e_x`` (0.75: the 3/4-chord point where thin-airfoil
+        theory evaluates the downwash of a rotating section, Pistolesi's theorem; Katz & Plotkin, *Low-Speed
+        Aerodynamics*, 2nd ed., Sect. 11.1, the lumped-vortex element). At the LE node, which lies almost on the
+        kite's yaw axis, a yaw rate changes no section's angle of attack; at 3/4 chord the tips feel it like fins.
 
     Returns
     -------
@@ -239,7 +249,11 @@ def apparent_wind(
     x_sec = np.asarray(x_sec, dtype=float)
     r1 = x_sec[:, 0]
     omega = np.asarray(omega, dtype=float)
-    v_a = r1 @ skew(omega).T  # omega × r_i1
+    if rotation_point_over_c is None:
+        v_a = r1 @ skew(omega).T  # omega × r_i1
+    else:
+        s_p = rotation_point_over_c * geometry.chord - 0.5 * geometry.tube_d  # from the LE node along e_x
+        v_a = (r1 + s_p[:, None] * geometry.e_x) @ skew(omega).T
     v_a += np.asarray(v_kite, dtype=float) - np.asarray(v_wind, dtype=float)  # Eq. (2)
     if x_sec_prev is not None and dt:
         prev = np.asarray(x_sec_prev, dtype=float)

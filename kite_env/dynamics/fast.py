@@ -322,7 +322,7 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
             F0[i, c] = -yk[3 * i + c]
     particle_accelerations_into(rk, vk, wind5, F0, F0, 0.0, True, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd,
                                 line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity,
-                                alpha, a, lam, work)
+                                alpha, zero_K, False, a, lam, work)
 
 
 @njit(**_JIT)
@@ -436,7 +436,7 @@ class SurrogateKites:
         ps = ParticleSystem(dyn, self.tip_lengths, np.zeros(4), cfg.aero.rho_kg_m3)
         # particle parameters shared by all kites (kernel_parameters without rest and pair damping)
         (self.m, _, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d, self.l_t, _, _,
-         self.g, self.baumgarte) = ps.kernel_parameters()
+         self.g, self.baumgarte, _, _) = ps.kernel_parameters()
         # the MLP with its normalisations folded into the first and last layers
         W, b = [w.astype(float) for w in surrogate.weights], [c.astype(float) for c in surrogate.biases]
         W[0] = W[0] / surrogate.x_std[:, None]

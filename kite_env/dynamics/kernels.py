@@ -46,26 +46,27 @@ _A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
 
 @njit(**_JIT)
 def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho, line_cd,
-                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha):
+                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha,
+                           minv_K, wing_inertia):
     """Constrained accelerations of A, B, C, D, KCU and the constraint multipliers (``FlightSimulator._rhs``):
     :func:`particle_accelerations_into` with new arrays. Returns ``(a, lam)``."""
     a = np.empty((5, 3))
     lam = np.empty(3)
     particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
                                 line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
-                                gravity, alpha, a, lam, np.empty(_WORK))
+                                gravity, alpha, minv_K, wing_inertia, a, lam, np.empty(_WORK))
     return a, lam
 
 
 #: length of the work array of :func:`particle_accelerations_into` (R 9, f_K 12, dq 12, f 15, e 12, l 4, T 4, fp 12,
-#: minv 5)
-_WORK = 85
+#: minv 5; wing inertia: f in K 12, M^-1 f in K 12, M^-1 G^T of the two tip constraints 24)
+_WORK = 133
 
 
 @njit(**_JIT)
 def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
                                 line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
-                                gravity, alpha, a, lam, work):
+                                gravity, alpha, minv_K, wing_inertia, a, lam, work):
     """Constrained accelerations of A, B, C, D, KCU into ``a`` (5, 3) and the constraint multipliers into ``lam``
     (3,), with the intermediate arrays in ``work`` (:data:`_WORK`,) (no allocation: the fast fidelity calls this
     16 times per kite and environment step).
@@ -102,6 +103,11 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         Dashpots along A-C, B-D, A-D, B-C (``particles.DAMPED_PAIRS``).
     gravity, alpha : float [m/s^2], [1/s]
         Gravity and the Baumgarte rate of the constraints.
+    minv_K : (12, 12) float [1/kg]
+        Inverse of the wing's mass matrix on A-D in frame K (``ParticleSystem.wing_mass_K``); read only with
+        ``wing_inertia``.
+    wing_inertia : bool
+        A-D carry the wing's (condensed, non-diagonal) mass matrix instead of the point masses ``m[:4]``.
 
     a : (5, 3) float [m/s^2], output
     lam : (3,) float, output
@@ -169,6 +175,9 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         f[i, 0] = 0.0
         f[i, 1] = 0.0
         f[i, 2] = 0.0 - m[i] * gravity
+    if wing_inertia:  # gravity on the wing mass enters as an acceleration (below)
+        for i in range(4):
+            f[i, 2] = 0.0
     for i in range(4):
         for j in range(3):  # f_wing = f_K R^T
             f[i, j] += f_K[i, 0] * R[j, 0] + f_K[i, 1] * R[j, 1] + f_K[i, 2] * R[j, 2]
@@ -263,6 +272,8 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         minv[i] = 1.0 / m[i]
         for k in range(3):
             a[i, k] = minv[i] * f[i, k]  # a_free
+    if wing_inertia:
+        _wing_inertia_free(f, R, minv_K, gravity, a, work[85:97], work[97:109])
     # tether: G = [0 ... r_KCU]
     rk0, rk1, rk2 = r[_KCU, 0], r[_KCU, 1], r[_KCU, 2]
     g = 0.5 * ((rk0 * rk0 + rk1 * rk1 + rk2 * rk2) - tether_length * tether_length)
@@ -273,6 +284,9 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
     lam[0] = (-gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga) / S
     for k in range(3):
         a[_KCU, k] += minv[_KCU] * (r[_KCU, k] * lam[0])
+    if wing_inertia:
+        _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, work[109:133].reshape((2, 12)))
+        return
     # tip beams: G = [... d ... -d ...] at (i, j) = (A, B), (C, D)
     for c in range(1, 3):
         i = 2 * (c - 1)
@@ -298,6 +312,82 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         a[j, 0] += minv[j] * (-d0 * lc)
         a[j, 1] += minv[j] * (-d1 * lc)
         a[j, 2] += minv[j] * (-d2 * lc)
+
+
+@njit(**_JIT)
+def _minv_W(R, minv_K, x, out):
+    """``out = M^-1 x`` for a (4, 3)-shaped force ``x`` on A-D in W, with the mass matrix held in K:
+    ``M_W^-1 = blkdiag(R) M_K^-1 blkdiag(R)^T``; ``out`` (12,) in W."""
+    for i in range(4):
+        for k in range(3):
+            acc = 0.0
+            for j in range(12):
+                jj = j // 3
+                jk = j - 3 * jj
+                # (R^T x)_j: K component jk of point jj
+                acc += minv_K[3 * i + k, j] * (R[0, jk] * x[jj, 0] + R[1, jk] * x[jj, 1] + R[2, jk] * x[jj, 2])
+            out[3 * i + k] = acc  # K components, rotated back below
+    for i in range(4):
+        t0, t1, t2 = out[3 * i], out[3 * i + 1], out[3 * i + 2]
+        for k in range(3):
+            out[3 * i + k] = R[k, 0] * t0 + R[k, 1] * t1 + R[k, 2] * t2
+
+
+@njit(**_JIT)
+def _wing_inertia_free(f, R, minv_K, gravity, a, fk, t):
+    """Unconstrained accelerations of A-D with the wing's mass matrix: ``a = M^-1 f - g e_z`` (gravity on the whole
+    wing mass; the condensed mass reproduces rigid translations exactly, so its generalized weight is ``M g``)."""
+    _minv_W(R, minv_K, f, t)
+    for i in range(4):
+        a[i, 0] = t[3 * i]
+        a[i, 1] = t[3 * i + 1]
+        a[i, 2] = t[3 * i + 2] - gravity
+
+
+@njit(**_JIT)
+def _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, w):
+    """Multipliers of the two tip-beam constraints (A-B, C-D) with the non-diagonal wing mass: both share the wing's
+    mass, so ``S = G M^-1 G^T`` is a full 2 x 2 matrix; ``a += M^-1 G^T lam``."""
+    rhs0 = 0.0
+    rhs1 = 0.0
+    gd = np.zeros((2, 4, 3))
+    for c in range(2):
+        i = 2 * c
+        j = i + 1
+        L = tip_lengths[c]
+        d0 = r[i, 0] - r[j, 0]
+        d1 = r[i, 1] - r[j, 1]
+        d2 = r[i, 2] - r[j, 2]
+        dv0 = v[i, 0] - v[j, 0]
+        dv1 = v[i, 1] - v[j, 1]
+        dv2 = v[i, 2] - v[j, 2]
+        g = 0.5 * ((d0 * d0 + d1 * d1 + d2 * d2) - L * L)
+        gdot_v = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
+        Gv = d0 * dv0 + d1 * dv1 + d2 * dv2
+        Ga = d0 * (a[i, 0] - a[j, 0]) + d1 * (a[i, 1] - a[j, 1]) + d2 * (a[i, 2] - a[j, 2])
+        rhs = -gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga
+        if c == 0:
+            rhs0 = rhs
+        else:
+            rhs1 = rhs
+        gd[c, i, 0], gd[c, i, 1], gd[c, i, 2] = d0, d1, d2
+        gd[c, j, 0], gd[c, j, 1], gd[c, j, 2] = -d0, -d1, -d2
+        _minv_W(R, minv_K, gd[c], w[c])
+    s00 = s01 = s10 = s11 = 0.0
+    for i in range(4):
+        for k in range(3):
+            s00 += gd[0, i, k] * w[0, 3 * i + k]
+            s01 += gd[0, i, k] * w[1, 3 * i + k]
+            s10 += gd[1, i, k] * w[0, 3 * i + k]
+            s11 += gd[1, i, k] * w[1, 3 * i + k]
+    det = s00 * s11 - s01 * s10
+    l1 = (s11 * rhs0 - s01 * rhs1) / det
+    l2 = (s00 * rhs1 - s10 * rhs0) / det
+    lam[1] = l1
+    lam[2] = l2
+    for i in range(4):
+        for k in range(3):
+            a[i, k] += w[0, 3 * i + k] * l1 + w[1, 3 * i + k] * l2
 
 
 @njit(**_JIT)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.config import DynamicsConfig
+from kite_env.frames import kite_frame
 
 A, B, C, D, KCU = range(5)
 #: bridle lines (wing point, KCU)
@@ -81,6 +82,24 @@ class ParticleSystem:
         self._pi, self._pj = pi_, pj
         self.rest = np.array([cfg.power_line_length_m, cfg.power_line_length_m, cfg.power_line_length_m,
                               cfg.power_line_length_m])  # L_A, L_B, L_C, L_D; L_B, L_D set by set_steering()
+        # the wing's mass matrix on A-D in frame K (set_wing_mass); None: the point masses m_A ... m_D
+        self.wing_mass_K: np.ndarray | None = None
+        self.wing_minv_K = np.zeros((12, 12))
+
+    def set_wing_mass(self, M_K: np.ndarray | None) -> None:
+        """Carry the wing's mass on A-D as the (12, 12) symmetric positive definite matrix ``M_K`` [kg] in frame K
+        (A, B, C, D x, y, z; :func:`kite_env.dynamics.wing_mass.condensed_wing_mass`) instead of the point masses
+        ``m_A ... m_D``; None restores the point masses. The point masses still weight the constraint projection
+        and the tip dampers' reduced masses."""
+        if M_K is None:
+            self.wing_mass_K = None
+            self.wing_minv_K = np.zeros((12, 12))
+            return
+        M_K = np.asarray(M_K, dtype=float)
+        if M_K.shape != (12, 12) or not np.allclose(M_K, M_K.T) or np.linalg.eigvalsh(M_K).min() <= 0.0:
+            raise ValueError("the wing mass matrix must be a symmetric positive definite (12, 12) array")
+        self.wing_mass_K = M_K
+        self.wing_minv_K = np.linalg.inv(M_K)
 
     def set_steering(self, L_B: float, L_D: float) -> None:
         """Rest lengths of the right (B) and left (D) steering lines [m]."""
@@ -91,12 +110,13 @@ class ParticleSystem:
     def kernel_parameters(self) -> tuple:
         """Parameters of the compiled right-hand side :func:`kite_env.dynamics.kernels.particle_accelerations`, in
         its argument order after ``K_b``: ``m (5,), rest (4,), k_c, c_c, rho, line_cd, line_diameter,
-        tether_diameter, tether_length, tip_lengths (2,), pair_damping (4,), gravity, alpha`` (SI units)."""
+        tether_diameter, tether_length, tip_lengths (2,), pair_damping (4,), gravity, alpha, minv_K (12, 12),
+        wing_inertia`` (SI units)."""
         cfg = self.cfg
         return (self.m, self.rest, float(cfg.line_stiffness_N_per_m), float(cfg.line_damping_Ns_per_m), self.rho,
                 float(cfg.line_cd), float(cfg.line_diameter_m), float(cfg.tether_diameter_m),
                 float(cfg.tether_length_m), self.tip_lengths, self.pair_damping, float(cfg.gravity_mps2),
-                float(cfg.baumgarte_1_per_s))
+                float(cfg.baumgarte_1_per_s), self.wing_minv_K, self.wing_mass_K is not None)
 
     # ------------------------------------------------------------------ forces
     def line_forces(self, r: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,6 +137,8 @@ class ParticleSystem:
         cfg = self.cfg
         f = np.zeros((5, 3))
         f[:, 2] -= self.m * cfg.gravity_mps2
+        if self.wing_mass_K is not None:
+            f[:4, 2] = 0.0  # gravity on the wing mass: an acceleration in accelerations()
         f[:4] += f_wing
         # bridle lines, Eq. (10): the tension pulls the wing point towards the KCU and the KCU towards the wing
         d, l, e, ldot = _dist_rows(r, v, self._li, self._lj)
@@ -169,12 +191,20 @@ class ParticleSystem:
         ``G a = -dG/dt v - 2 alpha G v - alpha^2 g`` (Baumgarte)."""
         g, G, gdot_v = self._constraints(r, v)
         al = self.cfg.baumgarte_1_per_s
-        minv = np.repeat(1.0 / self.m, 3)
-        a_free = minv * f.ravel()
+        Minv = np.diag(np.repeat(1.0 / self.m, 3))
+        a_free = Minv @ f.ravel()
+        if self.wing_mass_K is not None:
+            # A-D: M_W^-1 = blkdiag(R) M_K^-1 blkdiag(R)^T; gravity on the whole wing mass as -g e_z (the condensed
+            # mass reproduces rigid translations, so the generalized weight is M g)
+            _, R = kite_frame(r[A], r[B], r[C], r[D])
+            Rb = np.kron(np.eye(4), R)
+            Minv[:12, :12] = Rb @ self.wing_minv_K @ Rb.T
+            a_free = Minv @ f.ravel()
+            a_free[2:12:3] -= self.cfg.gravity_mps2
         rhs = -gdot_v - 2.0 * al * (G @ v.ravel()) - al * al * g - G @ a_free
-        S = (G * minv) @ G.T
+        S = G @ Minv @ G.T
         lam = np.linalg.solve(S, rhs)
-        a = a_free + minv * (G.T @ lam)
+        a = a_free + Minv @ (G.T @ lam)
         return a.reshape(5, 3), lam
 
     def project(self, r: np.ndarray, v: np.ndarray, iters: int = 3) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ import numpy as np
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations, project_constraints
 from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
+from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
 from kite_env.structure.kernels import resolve_backend
@@ -170,7 +171,10 @@ class FlightSimulator:
         r, v = self._project(r, v)
         self.state = ParticleState(r, v)
         self.t = t0
-        return self._solve_wing(first=True)
+        rec = self._solve_wing(first=True)
+        if cfg.dynamics.wing_mass == "distributed":
+            self.particles.set_wing_mass(condensed_wing_mass(wing, nodal_wing_mass(wing.mesh, cfg.dynamics)))
+        return rec
 
     def _start_wing(self, X: FlightState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The wing at the start: static equilibrium held by its bridle lines (tips free to move in y_k) at the

@@ -276,6 +276,19 @@ class StaticSolver:
         T_bb, T_fb, T_bf = (data[b] for b in blocks)
         return T_bb - T_bf @ self._lu.solve(T_fb)
 
+    def static_modes(self, dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Guyan's static modes of the prescribed ``dofs``: the response ``Phi_f = -T_ff^-1 T_fb`` (n_free, len(dofs))
+        of the free DOF to unit moves of the prescribed ones, with the free DOF in equilibrium (Guyan 1965, AIAA J.
+        3(2), 380), from the tangent of the current factorisation. Returns ``(free, Phi_f)``; ``dofs`` must be the
+        prescribed DOF of the last solve."""
+        if self._lu is None:
+            raise RuntimeError("static_modes needs a factorisation (call solve first)")
+        self.condensed_tangent(dofs)  # builds the block index cache
+        free = self._lu_free
+        _, T_fb_idx, _ = self._condense_cache[(np.asarray(dofs, dtype=np.int64).tobytes(), free.tobytes())]
+        data = np.append(self._lu_data, 0.0)
+        return free.copy(), -self._lu.solve(data[T_fb_idx])
+
     def _factorize(self, data, sel, ind, ptr, free, key):
         """LU of the reduced tangent: LAPACK banded (``gbtrf``) when the DOF numbering gives a narrow band (the kite
         mesh numbered section by section: bandwidth 47 of 1320 DOF, ~4x faster than SuperLU), else SuperLU.

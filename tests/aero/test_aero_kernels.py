@@ -132,6 +132,9 @@ def test_thresholds_and_constants_equal_reference():
     assert kernels._ALPHA_FP_MIN_DEG == breukels.ALPHA_FP_MIN_DEG
     assert kernels._X_REF_DEFAULT == breukels.X_REF_OVER_C_DEFAULT == loads.X_REF_OVER_C_DEFAULT
     assert kernels._RAD2DEG == np.rad2deg(1.0)
+    for name in ("ALPHA_NEG_START_DEG", "ALPHA_NEG_END_DEG", "CL_NEG_SAT", "ALPHA_NEG_ZL_DEG", "ALPHA_NEG_WIDTH_DEG",
+                 "CD_NEG_ADD", "CM_NEG_ADD", "ALPHA_NEG_CM_WIDTH_DEG"):  # negative-alpha branch
+        assert getattr(kernels, "_" + name) == getattr(breukels, name), name
     # the plane-normal floor is an inline literal of section_geometry
     assert f"np.maximum(h_len, {kernels._TINY!r})" in inspect.getsource(sections.section_geometry)
     np.testing.assert_array_equal(kernels.COEF, breukels._COEF)
@@ -142,13 +145,45 @@ def test_thresholds_and_constants_equal_reference():
         a = a_deg
         cl = ((lam[0] * a + lam[1]) * a + lam[2]) * a + lam[3]
         cd, cm = lam[4] * a * a + lam[5], lam[6] * a * a + lam[7]
-        got = kernels._lei_coefficients(math.radians(a_deg), t, kappa, 0.25)
+        got = kernels._lei_coefficients(math.radians(a_deg), t, kappa, 0.25, 0.25, 0)  # neg = 0: the regression
         np.testing.assert_allclose(got, (cl, cd, cm), rtol=1e-12, atol=1e-14)
     # independent values: physics_facts.md 1.6 (t = 0.100, kappa = 0.095, quarter chord), 4 decimals
     for a_deg, ref in ((-10.0, (-1.5413, 0.0781, -0.6336)), (0.0, (0.1417, 0.0427, 0.0705)),
                        (15.0, (1.8073, 0.1224, -1.5138))):
-        np.testing.assert_allclose(kernels._lei_coefficients(math.radians(a_deg), 0.1, 0.095, 0.25), ref,
+        np.testing.assert_allclose(kernels._lei_coefficients(math.radians(a_deg), 0.1, 0.095, 0.25, 0.25, 0), ref,
                                    rtol=0, atol=6e-5)
+
+
+# kernels._lei_coefficients(..., neg=0) before the negative-alpha branch existed, repr-exact (it differs from the
+# NumPy reference by round-off), at these angles [deg] for t = 0.07, kappa = 0.12, x_ref = 0.4, cm_ref = 0; rows CL,
+# CD, CM
+KERNEL_GOLDEN_DEG = (-150.0, -40.0, -25.0, -20.0, -12.0, -5.0, -2.0, -0.5)
+KERNEL_GOLDEN = [
+    [0.43301270189221874, -0.6330222215594888, -0.8558867362235325, -1.8187197562800004, -1.7219600794800003,
+     -0.74152573578, -0.2003333022, 0.0780934444245],
+    [0.25, 0.5311687126375895, 0.20826911188325756, 0.19265199390000004, 0.09931215338800004, 0.055923711900000006,
+     0.048266928108, 0.046899645288],
+    [0.04999999999999716, 0.08263518223330735, -2.201357397581296, -3.268051993927807, -1.5347689992129634,
+     -0.35750891685218694, -0.0009478224253878093, 0.13586298927838442],
+]
+
+
+def test_lei_coefficients_kernel_breukels_mode_unchanged():
+    got = [kernels._lei_coefficients(math.radians(a), 0.07, 0.12, 0.4, 0.0, 0) for a in KERNEL_GOLDEN_DEG]
+    np.testing.assert_array_equal(np.array(got).T, np.array(KERNEL_GOLDEN))
+    # default neg = 1 is the bounded branch
+    assert kernels._lei_coefficients(math.radians(-10.0), 0.1, 0.08, 0.25)[0] > -0.6
+
+
+@pytest.mark.parametrize("mode,neg", [("bounded", 1), ("breukels", 0)])
+def test_lei_coefficients_kernel_equals_reference(mode, neg):
+    # the scalar compiled twin against breukels.lei_coefficients on a fine grid over all angles and branches
+    a = np.deg2rad(np.linspace(-180.0, 180.0, 7201))
+    for t, kappa, x_ref, cm_ref in [(0.1, 0.08, 0.25, 0.25), (0.07, 0.12, 0.4, 0.0), (0.2, 0.0, 0.0, 0.25),
+                                    (0.12, 0.16, 0.6, 0.1)]:
+        ref = np.array(breukels.lei_coefficients(a, t, kappa, x_ref, cm_ref, negative_alpha=mode))
+        got = np.array([kernels._lei_coefficients(v, t, kappa, x_ref, cm_ref, neg) for v in a]).T
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("name,seed,kw", CASES, ids=[c[0] for c in CASES])

@@ -1,0 +1,43 @@
+"""Open-loop steering authority of the full model: yaw rate per steering input at a few wind speeds.
+
+    python scripts/turn_rate.py [--dl -0.2,0.1,0.2,0.3] [--wind 5,7] [--set section.key=value ...]
+
+Prints a table of the neutral-subtracted yaw rate psi_dot per held steering-line difference dL = L_B - L_D
+(kite_env.turn_rate): about 5 rad/s per m in the paper's Fig. 16, 2.5-5 in V3 flight data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def main(argv=None) -> int:
+    from kite_env.config import ConfigError, load_config
+    from kite_env.turn_rate import turn_rate_table
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--dl", default="-0.2,0.1,0.2,0.3", help="held inputs L_B - L_D [m], comma separated")
+    p.add_argument("--wind", default="5", help="wind speeds [m/s], comma separated")
+    p.add_argument("--set", action="append", default=[], help="config override section.key=value (repeatable)")
+    args = p.parse_args(argv)
+    try:
+        cfg = load_config(None, args.set)
+        dls = [float(x) for x in args.dl.split(",")]
+        winds = [float(x) for x in args.wind.split(",")]
+    except (ConfigError, ValueError) as exc:
+        print(f"turn_rate: {exc}", file=sys.stderr)
+        return 2
+    if any(d == 0.0 for d in dls):
+        print("turn_rate: --dl must not contain 0 (the neutral flight is subtracted)", file=sys.stderr)
+        return 2
+    rows = turn_rate_table(cfg, dls, winds)
+    print(f"{'wind [m/s]':>10} {'dL [m]':>7} {'yaw rate [rad/s]':>17} {'per dL [rad/s/m]':>17} {'airspeed [m/s]':>15}  end")
+    for r in rows:
+        print(f"{r['wind_mps']:10.1f} {r['dl_m']:7.2f} {r['yaw_rate_rad_s']:17.3f} {r['per_m']:17.2f} "
+              f"{r['airspeed_mps']:15.1f}  {r['end']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
