@@ -56,19 +56,25 @@ class AeroConfig:
     rho_kg_m3: float = 1.225  # air density, sea level (physics_facts 4.2) [kg/m^3]
     # Eq. (9) M = 1/2 rho CM c^p w V^2: p = 2 dimensionally consistent (default); 1 = as printed in the paper
     moment_chord_power: float = 2.0  # [-]
-    # luffing (a modelling option, not the paper): below this section CL the load moves from the canopy nodes to the
-    # LE and TE nodes (all of it at CL <= 0: a membrane cannot carry a reversed pressure); 0 = off (the paper)
-    luffing_cl: float = 0.0  # [-]
-    # point / chord (from the airfoil nose) that Breukels' regression CM is taken about: 0.25 (quarter chord) is the
-    # convention of the open VSM codes, not confirmed for Breukels (aero/breukels.py); 0 = about the nose
-    cm_regression_ref_over_c: float = 0.25  # [-]
+    # luffing canopy: a membrane cannot carry a reversed pressure, so as a section's CL falls to 0 its load moves from
+    # the canopy nodes to the LE (tube) and TE (wire) nodes (aero.loads.LUFFING_BAND_CL); false = the paper
+    canopy_luffing: bool = True
+    # point / chord (from the airfoil nose) that Breukels' regression CM is taken about: 0 = the nose (gives the paper's
+    # 7.5 deg mid-wing alpha, docs/flight_model.md); 0.25 = the quarter chord, the open VSM codes' assumption
+    cm_regression_ref_over_c: float = 0.0  # [-]
     # damping of the wing's deformation velocity: "consistent" = each section's quasi-steady force response to its
     # own translation velocity, spread over its nodes (symmetric part positive semi-definite; fsi.SectionDamping);
     # "eq3" = Eq. (3) as printed (mean LE/TE finite-difference velocity in the inflow): indefinite, unstable
     damping: str = "consistent"
     # point of each section where the frame's rotation omega x r enters the inflow (Eq. 2): "le_node" = the paper's
     # LE node; "three_quarter_chord" = the 3/4-chord point (Pistolesi's rotation-rate collocation point)
-    rotation_point: str = "le_node"
+    rotation_point: str = "three_quarter_chord"
+    # 3-D induced drag, C_D += C_L^2 / (pi e AR) per section (aero.loads.section_loads; e from Raymer's estimate at the
+    # wing's projected aspect ratio); false = the paper's 2-D sections, which it names as why its L/D exceeds ~6
+    induced_drag: bool = False
+    # section coefficients below zero lift: "bounded" by V3 2-D CFD data (aero/breukels.py), or "breukels" (the
+    # regression as is, 4-5 times the measured negative lift)
+    negative_alpha: str = "bounded"
 
 
 @dataclass(frozen=True)
@@ -109,19 +115,24 @@ class DynamicsConfig:
     dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
     baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
-    # the wing's mass on A-D: "distributed" = Table 1's total over the FE nodes (70 % on the LE tube), condensed onto
-    # A-D with the wing's static modes (dynamics/wing_mass.py); "points" = the paper's four point masses
-    wing_mass: str = "distributed"
+    # share of Table 1's wing mass kept as the paper's four point masses at A-D; the rest is spread over the FE nodes
+    # (70 % on the LE tube) and condensed onto A-D with the wing's static modes (dynamics/wing_mass.py). 1 = the
+    # paper. 0.6 is the smallest share for which the explicit RK4 step with the bridle-line dampers is stable up to
+    # dt = 10 ms (end masses m_B = m_D >= c_c dt / 2.78 = 0.9 kg; the condensed modes alone put 0.04 kg there)
+    wing_point_mass_share: float = 0.6  # [-]
 
 
 @dataclass(frozen=True)
 class ControlConfig:
     # the paper's steering (Eq. 14-17) and force (Eq. 18-19) controllers; gains not given in the paper
-    k1_m_per_rad: float = 0.4  # heading error -> desired steering-line difference, Eq. (15) [m/rad]
-    k2: float = 1.0  # steering-line length loops, Eq. (16-17) [-]
-    k3_m: float = 0.05  # force-ratio loop, Eq. (19) [m]
+    # gains chosen for this model's steering authority (docs/flight_model.md, "Controller gains"): the paper gives none
+    k1_m_per_rad: float = 1.0  # heading error -> desired steering-line difference, Eq. (15) [m/rad]
+    k2: float = 3.0  # steering-line length loops, Eq. (16-17) [-]
+    k3_m: float = 0.5  # force-ratio loop, Eq. (19) [m]
+    k3i_per_s: float = 2.0  # integral gain of the force-ratio loop (kite_env.control; 0 = the paper's Eq. 19) [m/s]
+    force_integral_max_m: float = 1.0  # anti-windup: |K3i I| at most this [m]
     mu_target: float = 0.3  # desired force ratio mu* (Sect. III.B) [-]
-    delta_l_max_m: float = 0.25  # limit of the desired steering-line difference |dl*| [m]
+    delta_l_max_m: float = 1.5  # limit of the desired steering-line difference |dl*| [m]
     beta_distance_deg: float = 4.0  # blending: beta = 1/2 at this distance to the path (on the unit sphere) [deg]
     beta_min: float = 0.2  # blending: smallest weight of the path tangent [-]
     control_dt_s: float = 0.02  # controller update period [s]
@@ -145,8 +156,6 @@ FIDELITIES = ("fe", "surrogate")
 AERO_DAMPING = ("consistent", "eq3")
 #: aero.rotation_point choices (aero.sections.apparent_wind): the paper's LE node, or the 3/4-chord point
 ROTATION_POINTS = ("le_node", "three_quarter_chord")
-#: dynamics.wing_mass choices (kite_env.dynamics.wing_mass)
-WING_MASS = ("distributed", "points")
 
 #: observation terms of the Gymnasium environment (kite_env.envs), in the order they are stacked
 OBSERVATION_TERMS = ("position", "heading", "line_forces", "path", "rates", "actuator")
@@ -220,7 +229,7 @@ _UNBOUNDED_OK = {"env.start_curvature_max"}
 _NON_NEGATIVE = {
     "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
-    "control.k3_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "aero.luffing_cl", "env.w_tracking",
+    "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
     "env.wind_speed_max_mps", "env.turbulence_intensity_max",
 }
@@ -317,6 +326,9 @@ def _validate(cfg: Config) -> None:
                           f"got {cfg.aero.cm_regression_ref_over_c}")
     if cfg.aero.damping not in AERO_DAMPING:
         raise ConfigError(f"config key 'aero.damping' must be one of {', '.join(AERO_DAMPING)}, got {cfg.aero.damping!r}")
+    if cfg.aero.negative_alpha not in ("bounded", "breukels"):
+        raise ConfigError(f"config key 'aero.negative_alpha' must be 'bounded' or 'breukels', "
+                          f"got {cfg.aero.negative_alpha!r}")
     if cfg.aero.rotation_point not in ROTATION_POINTS:
         raise ConfigError(f"config key 'aero.rotation_point' must be one of {', '.join(ROTATION_POINTS)}, "
                           f"got {cfg.aero.rotation_point!r}")
@@ -328,9 +340,9 @@ def _validate(cfg: Config) -> None:
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")
-    if cfg.dynamics.wing_mass not in WING_MASS:
-        raise ConfigError(f"config key 'dynamics.wing_mass' must be one of {', '.join(WING_MASS)}, "
-                          f"got {cfg.dynamics.wing_mass!r}")
+    if not 0.0 <= cfg.dynamics.wing_point_mass_share <= 1.0:
+        raise ConfigError("config key 'dynamics.wing_point_mass_share' must lie in [0, 1], "
+                          f"got {cfg.dynamics.wing_point_mass_share}")
     if cfg.control.beta_min > 1.0:
         raise ConfigError(f"config key 'control.beta_min' must lie in [0, 1], got {cfg.control.beta_min}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:

@@ -7,7 +7,17 @@ steering-line springs from the error of the actual difference ``dl = l_B - l_D``
 controller adds the same increment to both (Eq. 18-19):
 
     L_B = L_B,0 + K2 (dl* - dl) + L3
-    L_D = L_D,0 - K2 (dl* - dl) + L3,        L3 = -K3 (mu* - mu),   mu = (F_cB + F_cD) / (F_cA + F_cC)
+    L_D = L_D,0 - K2 (dl* - dl) + L3,        L3 = -K3 (mu* - mu) - K3i I,   mu = (F_cB + F_cD) / (F_cA + F_cC)
+
+with ``I = int (mu* - mu) dt`` (``control.k3i_per_s``; 0 = the paper's proportional force controller, Eq. 19).
+
+Why an integral term. The paper's force loop is proportional; its gain is not given. In a turn the steering input
+``dL = L_B - L_D`` is split symmetrically, so the released line is paid out by ``dL / 2``; when that exceeds its
+stretch (about 0.3-0.8 m at 3-4 kN per line, k_c = 4.52 kN/m) the line goes slack, the released tip's trailing edge
+is free and the tip luffs down to -60 deg (measured), and mu falls. A proportional loop holds mu only with a gain
+large enough to limit-cycle at the controller rate (K3 = 1 m); the integral term shortens both steering lines until
+mu is back at mu*, i.e. until the released line carries its share again, as the common-mode (depower) actuation of a
+KCU does. The integral is clamped to +-``control.force_integral_max_m`` (anti-windup).
 
 Sign of the K2 loop. Eq. (16-17) as printed read ``L_B = L_B,0 - K2 (dl* - dl)``, ``L_D = L_D,0 + K2 (dl* - dl)``
 with ``dl = l_B - l_D``: for K2 > 0 that lengthens the left and shortens the right line when ``dl`` should grow,
@@ -41,6 +51,7 @@ class LineActuator:
         self.cfg = cfg
         self.L_B0 = float(L_B0)
         self.L_D0 = float(L_D0)
+        self.integral = 0.0  # I = int (mu* - mu) dt [s], see the module docstring
 
     @staticmethod
     def force_ratio(line_tension: np.ndarray) -> float:
@@ -52,15 +63,26 @@ class LineActuator:
         """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
 
         ``delta_l_star`` [m] is clipped to ``+-control.delta_l_max_m``; ``line_length`` and ``line_tension`` are the
-        current lengths and tensions of the lines A, B, C, D.
+        current lengths and tensions of the lines A, B, C, D. One call is one controller period
+        (``control.control_dt_s``): it advances the force loop's integral.
         """
         cfg = self.cfg
         dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
         l = np.asarray(line_length, dtype=float)
         dl = float(l[1] - l[3])  # Delta l = l_B - l_D (Sect. III.A)
         mu = self.force_ratio(line_tension)
-        L3 = -cfg.k3_m * (cfg.mu_target - mu)  # Eq. (19)
+        self.integral = force_integral(self.integral, cfg.mu_target - mu, cfg)
+        L3 = -cfg.k3_m * (cfg.mu_target - mu) - cfg.k3i_per_s * self.integral  # Eq. (19), plus the integral term
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
+
+
+def force_integral(integral, error, cfg: ControlConfig):
+    """The force loop's integral ``I + (mu* - mu) dt_c`` over one controller period, clamped so that
+    ``|K3i I| <= control.force_integral_max_m`` (anti-windup); works on floats and arrays (batched env)."""
+    if cfg.k3i_per_s <= 0.0:
+        return integral * 0.0
+    lim = cfg.force_integral_max_m / cfg.k3i_per_s
+    return np.clip(integral + error * cfg.control_dt_s, -lim, lim)

@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kite_env.aero.loads import load_jacobian, section_damping, section_loads, wing_totals
+from kite_env.aero.loads import (LUFFING_BAND_CL, load_jacobian, oswald_efficiency, projected_planform,
+                                 section_damping, section_loads, wing_totals)
 from kite_env.config import Config
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteMesh
 from kite_env.structure import rotations, tube
@@ -167,6 +168,13 @@ class AeroelasticWing:
                                   max_iter=self.cfg.fsi.max_newton_iter),
         }
         self.bridle = np.asarray(mesh.bridle)
+        # induced drag (aero.induced_drag, _downwashed): the unloaded wing's projected planform and span efficiency
+        span, self.planform_area_m2 = projected_planform(mesh.nodes[mesh.sections])
+        self.aspect_ratio = span * span / self.planform_area_m2
+        self.span_efficiency = oswald_efficiency(self.aspect_ratio)
+        self._downwash: tuple[float, np.ndarray] | None = None  # (induced angle [rad], net-lift direction in K)
+        self._free_flight: FlightState | None = None  # the flight state without the downwash (lift/drag totals)
+        self._last_downwash_change = 0.0
         self.n_dof = 6 * mesh.n_nodes
         # translational DOF of the section load points, in the order of SectionLoads.nodal_forces.ravel()
         self._load_dofs = (6 * mesh.sections[:, :, None] + np.arange(3)).ravel()
@@ -190,6 +198,7 @@ class AeroelasticWing:
         self.state = self.unloaded_state()
         self._sec_prev = None
         self._step_prev = None
+        self._downwash = None
 
     def _predict(self, dt: float | None) -> NodalState:
         """Start of a warm time step: the last solution, linearly extrapolated in time when the two previous
@@ -266,27 +275,80 @@ class AeroelasticWing:
     def _cm_continuation(self, state, q_b, flight, dt, support, ramp, history, step, method):
         """A cold solve with Breukels' C_M taken about a point ahead of the quarter chord (``aero.
         cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation: the load ramp with the C_M about
-        the quarter chord, then the point moved forward in steps of 0.05 c, each converged. From the unloaded wing
+        the quarter chord, then the point moved forward in steps of 0.05 c (halved where Newton fails, down to 1/64 of
+        that), each converged. From the unloaded wing
         directly it fails: there the mid sections sit at alpha of about 0.3 deg, where the centre of pressure of
         a nose-referenced C_M lies far ahead of the nose and pushes the aft canopy to the pressure side. Only the path
         to the equilibrium changes. Returns the state to start the final solve from."""
         target = self.cfg.aero.cm_regression_ref_over_c
         if target >= self.CM_CONTINUATION_START:
             return state
-        n = int(np.ceil((self.CM_CONTINUATION_START - target) / self.CM_CONTINUATION_STEP - 1e-9))
-        points = self.CM_CONTINUATION_START - self.CM_CONTINUATION_STEP * np.arange(n)
-        for cm_ref in points:
-            self._cm_ref = float(cm_ref)
-            state, _ = self._attempts(state, state.x[self.bridle].copy(), q_b, 1, False, flight, dt, support,
-                                      ramp[-1], history, step, method)
+        current, h = self.CM_CONTINUATION_START, self.CM_CONTINUATION_STEP
+        while current > target + 1e-12:
+            nxt = max(target, current - h)
+            self._cm_ref = float(nxt)
+            try:
+                state, _ = self._attempts(state, state.x[self.bridle].copy(), q_b, 1, False, flight, dt, support,
+                                          ramp[-1], history, step, method)
+            except WingConvergenceError:
+                h *= 0.5  # a step too far for Newton: halve it (the state is still the last converged one)
+                if h < self.CM_CONTINUATION_STEP / 64:
+                    raise
+                continue
+            current = nxt
         return state
 
     def _aero_options(self) -> dict:
         """Keyword arguments of :func:`kite_env.aero.loads.section_loads` from ``cfg.aero``."""
         a = self.cfg.aero
-        return dict(moment_chord_power=a.moment_chord_power, luffing_cl=a.luffing_cl,
+        return dict(moment_chord_power=a.moment_chord_power, luffing_cl=LUFFING_BAND_CL if a.canopy_luffing else 0.0,
                     cm_regression_ref_over_c=a.cm_regression_ref_over_c if self._cm_ref is None else self._cm_ref,
-                    rotation_point_over_c=0.75 if a.rotation_point == "three_quarter_chord" else None)
+                    rotation_point_over_c=0.75 if a.rotation_point == "three_quarter_chord" else None,
+                    negative_alpha=a.negative_alpha)
+
+    # ------------------------------------------------------------------ induced drag (aero.induced_drag)
+    def _downwashed(self, flight: FlightState) -> FlightState:
+        """The flight state with the wing's induced downwash added to the wind at every section: Prandtl's lifting
+        line with an elliptic loading, a uniform induced velocity ``w = -alpha_i V e_L`` opposite to the wing's net
+        lift, ``alpha_i = C_L / (pi e AR)`` (Anderson, *Fundamentals of Aerodynamics*, 5th ed., Sect. 5.3.1, Eq.
+        5.42-5.43; ``e`` from Raymer's estimate, :func:`kite_env.aero.loads.oswald_efficiency`, at the projected
+        aspect ratio). Each section's inflow turns by ``alpha_i`` where its plane contains ``e_L`` (the mid-wing) and
+        hardly at the near-vertical tips; its lift tilts back with the inflow, which is the induced drag, ``D_i =
+        alpha_i L`` in total. ``C_L`` and ``e_L`` are those of the last committed solution (held over a time step,
+        iterated to a fixed point at a cold start in :meth:`solve`)."""
+        self._free_flight = flight
+        if not self.cfg.aero.induced_drag or self._downwash is None:
+            return flight
+        alpha_i, e_L = self._downwash
+        V = float(np.linalg.norm(flight.v_kite - flight.v_wind))
+        return dataclasses.replace(flight, v_wind=flight.v_wind - alpha_i * V * e_L)
+
+    def _update_downwash(self, sol: "WingSolution", flight: FlightState, dt: float | None = None) -> float:
+        """Induced angle and lift direction from a solution at the free ``flight``; returns the change of the angle.
+
+        In a time step (``dt``) the induced angle follows its quasi-steady value with a first-order lag of time
+        constant ``tau = b / (2 V)``, the time the air takes to pass half the span: the trailing wake, and with it the
+        downwash, builds up over a few chord lengths of travel after a change of lift (Wagner's indicial response of
+        the circulation and its finite-wing form by R. T. Jones, NACA Report 681, 1940). Without the lag the induced
+        angle, computed from the previous step's lift, over-corrects from step to step (the explicit fixed-point
+        iteration of a quantity that reduces its own source)."""
+        v_a = flight.v_kite - flight.v_wind
+        V = float(np.linalg.norm(v_a))
+        lift_vec = sol.aero_force - (sol.aero_force @ v_a) / (V * V) * v_a  # perpendicular to the free stream
+        L = float(np.linalg.norm(lift_vec))
+        if V <= 0.0 or L <= 0.0:
+            self._downwash = None
+            return 0.0
+        CL = L / (0.5 * self.cfg.aero.rho_kg_m3 * V * V * self.planform_area_m2)
+        alpha_i = CL / (np.pi * self.span_efficiency * self.aspect_ratio)
+        old = self._downwash[0] if self._downwash is not None else 0.0
+        if dt and self._downwash is not None:
+            tau = 0.5 * np.sqrt(self.aspect_ratio * self.planform_area_m2) / V  # b / (2 V)
+            alpha_i = old + (alpha_i - old) * (1.0 - np.exp(-dt / tau))
+        self._downwash = (alpha_i, lift_vec / L)
+        self._last_downwash_change = abs(alpha_i - old)
+        return self._last_downwash_change
+
 
     def _eq3(self, dt: float | None) -> bool:
         """The paper's Eq. (3) as printed: the deformation velocity enters the section inflow."""
@@ -339,6 +401,10 @@ class AeroelasticWing:
         if not np.all(np.isfinite(q_b)):
             raise ValueError("bridle positions q_b contain non-finite values")
         t0 = time.perf_counter()
+        free = flight
+        if not warm:
+            self._downwash = None
+        flight = self._downwashed(flight)
         predicted = warm and self.state is not None and self.cfg.fsi.extrapolate and self._step_prev is not None
         if warm and self.state is not None:
             state = self._predict(dt) if predicted else self.state.copy()
@@ -382,6 +448,19 @@ class AeroelasticWing:
             self.state = state
             self._sec_prev = state.x[self.mesh.sections].copy()
         sol.history.append({"wall_s": time.perf_counter() - t0})
+        if self.cfg.aero.induced_drag and commit:
+            prev = 0.0 if self._downwash is None else self._downwash[0]
+            change = self._update_downwash(sol, free, dt if warm else None)
+            # cold start: iterate the induced angle to a fixed point, in under-relaxed steps of at most 1 deg (a
+            # sudden 5 deg turn of the inflow would be too large a step for the wing's Newton solve)
+            for _ in range(40 if not warm else 0):
+                if change < 1e-4:
+                    break
+                alpha_i, e_L = self._downwash
+                self._downwash = (prev + float(np.clip(0.5 * (alpha_i - prev), -0.0175, 0.0175)), e_L)
+                prev = self._downwash[0]
+                sol = self.solve(q_b, free, support=support, warm=True, method=method)
+                change = abs(self._downwash[0] - prev)
         return sol
 
     def _attempts(self, start, q_start, q_b, n_sub, predicted, flight, dt, support, scale, history, step, method):
@@ -562,7 +641,8 @@ class AeroelasticWing:
 
     def _solution(self, state, loads, F_b, flight, scale, history, newton_iters, collapsed, accepted=False):
         """WingSolution of a converged shape; ``F_b = F_i^b - F_a^b`` (Eq. 1, second block)."""
-        tot = wing_totals(loads, flight.v_kite - flight.v_wind)
+        free = self._free_flight if self._free_flight is not None else flight
+        tot = wing_totals(loads, free.v_kite - free.v_wind)  # lift and drag about the free stream (induced drag)
         return WingSolution(
             F_b=F_b, nodes=state.x.copy(), alpha=loads.alpha, CL=loads.CL, CD=loads.CD, CM=loads.CM,
             aero_force=scale * tot["force"], lift=scale * tot["lift"], drag=scale * tot["drag"],

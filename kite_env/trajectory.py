@@ -155,9 +155,11 @@ def geodesic_distance(r1: np.ndarray, r2: np.ndarray) -> np.ndarray | float:
 # ---------------------------------------------------------------------------------------------- lemniscate
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    width_deg: float = 120.0  # full azimuth span of the figure-eight [deg]
-    height_deg: float = 36.0  # full elevation span of the figure-eight [deg]
-    elevation_deg: float = 30.0  # elevation of the crossing point [deg]
+    # sized from the model's turn rate (docs/flight_model.md, "The figure-eight"): lobes from 15.2 to 55.2 deg
+    # elevation, smallest radius 36.5 m on the 105 m sphere; the paper's 120 x 36 deg at 30 deg reaches 6.5 deg
+    width_deg: float = 100.0  # full azimuth span of the figure-eight [deg]
+    height_deg: float = 40.0  # full elevation span of the figure-eight [deg]
+    elevation_deg: float = 38.0  # elevation of the crossing point [deg]
     azimuth_deg: float = 0.0  # azimuth of the crossing point [deg]
     n_samples: int = 2000  # precomputed samples for the global nearest-point search [-]
 

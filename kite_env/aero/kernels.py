@@ -145,7 +145,7 @@ def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25, neg=1):
 
 @njit(**_JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
-                         has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25, rot_x=-1.0):
+                         has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25, rot_x=-1.0, neg=1):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
 
     Parameters
@@ -173,13 +173,15 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         ``sections.spanwise_directions`` does.
     has_span : bool
     luff : float
-        ``aero.luffing_cl`` (0: off): below this CL the share ``1 - CL/luff`` of the section load moves to the LE and
-        TE nodes (``loads.distribute`` with ``canopy_share``).
+        Luffing band (0: off): below this CL the share ``1 - smoothstep(CL/luff)`` of the section load moves to the
+        LE and TE nodes (``loads.distribute`` with ``canopy_share``).
     cm_ref : float [-]
         Point / chord (from the leading edge) the regression CM is taken about (``breukels.lei_coefficients``).
     rot_x : float [-]
         Point / chord (from the airfoil nose) where the frame rotation ``omega x r`` of Eq. (2) is taken; negative:
         the LE node (the paper), ``sections.apparent_wind``.
+    neg : int
+        Negative-alpha branch of the coefficients: 1 bounded (measured data), 0 Breukels' regression as is.
 
     Outputs (written)
     -----------------
@@ -294,7 +296,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         alpha = math.atan2(uz, ux)
         speed2 = ux * ux + uz * uz
         t_c = d * inv_c  # Eq. (5)
-        cl, cd, cm = _lei_coefficients(alpha, t_c, kappa, x_ref, cm_ref)
+        cl, cd, cm = _lei_coefficients(alpha, t_c, kappa, x_ref, cm_ref, neg)
         # ---------------------------------------------------------------- section loads, Eq. (7)-(9)
         hcw = half_rho * c * width[i]
         k = hcw * math.sqrt(speed2)
@@ -331,6 +333,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         mu2 = ms2 = mz2 = 0.0
         if luff > 0.0:
             wl = min(max(cl / luff, 0.0), 1.0)
+            wl = wl * wl * (3.0 - 2.0 * wl)  # smoothstep (loads.section_loads)
             # the same minimum-norm law on the LE and TE nodes only
             e_s0, e_z0 = node[1, i, 0, 0], node[1, i, 0, 2]
             e_s1, e_z1 = node[1, i, m - 1, 0], node[1, i, m - 1, 2]
@@ -353,7 +356,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,
                          x_ref_over_c=0.25, spanwise=None, moment_chord_power=2.0, luffing_cl=0.0,
-                         cm_ref_over_c=0.25, rotation_point_over_c=None):
+                         cm_ref_over_c=0.25, rotation_point_over_c=None, negative_alpha="bounded"):
     """Fields of :class:`kite_env.aero.loads.SectionLoads` from the compiled kernel (same arguments as
     :func:`kite_env.aero.loads.section_loads`, Eq. 2-9).
 
@@ -370,6 +373,7 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
     spanwise : (n_sec, 3) float, optional
     moment_chord_power, luffing_cl, cm_ref_over_c : float
     rotation_point_over_c : float or None
+    negative_alpha : {"bounded", "breukels"}
 
     Returns
     -------
@@ -406,7 +410,8 @@ def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec
                          np.ascontiguousarray(omega, dtype=float), v_w, float(rho), float(x_ref_over_c),
                          float(moment_chord_power), span,
                          has_span, scal, vec, node, zeta, axes, float(luffing_cl), float(cm_ref_over_c),
-                         -1.0 if rotation_point_over_c is None else float(rotation_point_over_c))
+                         -1.0 if rotation_point_over_c is None else float(rotation_point_over_c),
+                         1 if negative_alpha == "bounded" else 0)
     alpha, cl, cd, cm, moment, s_ref, q_dyn, chord, t, kappa = scal
     lift, drag, v_app = vec
     nodal, local = node

@@ -117,6 +117,10 @@ class SectionLoads:
         return self.geometry.r_le + self.s_ref[:, None] * self.geometry.e_x
 
 
+#: CL below which a section's canopy begins to luff (``aero.canopy_luffing``): the regularisation band of the blend to
+#: edge-only loads, about 1 deg of alpha at the lift slope near zero lift (0.09 per deg, aero.breukels)
+LUFFING_BAND_CL = 0.1
+
 # maps section coordinates (s, y, z) of a lever arm d to g = e_y × d = (z, 0, -s), as a row vector: g = d @ _EY_CROSS
 _EY_CROSS = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
 # weights of the (s, y, z) components in the polar moment sum |g_j - g_mean|^2 (the y offsets do not enter)
@@ -184,6 +188,7 @@ def section_loads(
     luffing_cl: float = 0.0,
     cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
     rotation_point_over_c: float | None = None,
+    negative_alpha: str = "bounded",
 ) -> SectionLoads:
     """Aerodynamic loads of all wing sections and their nodal distribution (Eq. 2-9).
 
@@ -219,10 +224,11 @@ def section_loads(
         moment; 1 is the formula as printed in the paper (a moment per 1 m of reference length), kept for
         sensitivity studies (module docstring).
     luffing_cl : float
-        0 (default): the paper's distribution. > 0: a section whose lift coefficient is below ``luffing_cl`` is
-        treated as luffing (a membrane cannot carry a reversed pressure difference): the share
-        ``w = clip(CL / luffing_cl, 0, 1)`` of its load stays on all nodes, the rest is carried by the LE and TE nodes
-        only (:func:`distribute`); force, moment and coefficients are unchanged. A modelling option, not the paper.
+        0 (default): the paper's distribution. > 0: the width of the luffing band (``aero.canopy_luffing`` uses
+        ``LUFFING_BAND_CL``): a membrane cannot carry a reversed pressure difference, so as a section's lift
+        coefficient falls from ``luffing_cl`` to 0 its canopy nodes give up their load: the share
+        ``w = smoothstep(CL / luffing_cl)`` stays on all nodes, the rest is carried by the LE (tube) and TE (wire)
+        nodes only (:func:`distribute`); at CL <= 0 all of it. Force, moment and coefficients are unchanged.
     cm_regression_ref_over_c : float [-]
         Point / chord (from the airfoil leading edge) that Breukels' regression CM is taken about (default the
         quarter chord, an assumption: :mod:`kite_env.aero.breukels`). Unlike ``x_ref_over_c`` this changes the
@@ -230,6 +236,9 @@ def section_loads(
     rotation_point_over_c : float, optional [-]
         Where the frame rotation enters Eq. (2): None = the LE node (the paper), else that point / chord from the
         airfoil nose (:func:`kite_env.aero.sections.apparent_wind`; 0.75 = Pistolesi's 3/4-chord point).
+    negative_alpha : {"bounded", "breukels"}
+        Section coefficients below zero lift: bounded by measured data (default) or Breukels' regression as is
+        (:func:`kite_env.aero.breukels.lei_coefficients`).
 
     Returns
     -------
@@ -238,7 +247,7 @@ def section_loads(
     if resolve_backend(backend) == "numba":
         return SectionLoads(*section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt,
                                                   x_ref_over_c, spanwise, moment_chord_power, luffing_cl,
-                                                  cm_regression_ref_over_c, rotation_point_over_c))
+                                                  cm_regression_ref_over_c, rotation_point_over_c, negative_alpha))
     x_sec = np.asarray(x_sec, dtype=float)
     geom = section_geometry(x_sec, tube_d, spanwise)
     v_a = apparent_wind(x_sec, v_kite, omega, v_wind, x_sec_prev, dt, geom, rotation_point_over_c)
@@ -247,7 +256,8 @@ def section_loads(
     u_loc, alpha = inflow(v_a, geom)
     u_loc[:, 1] = 0.0
     speed2 = u_loc[:, 0] ** 2 + u_loc[:, 2] ** 2
-    CL, CD, CM = lei_coefficients(alpha, geom.t, geom.kappa, x_ref_over_c, cm_regression_ref_over_c)
+    CL, CD, CM = lei_coefficients(alpha, geom.t, geom.kappa, x_ref_over_c, cm_regression_ref_over_c,
+                                  negative_alpha=negative_alpha)
     hcw = (0.5 * rho) * c * np.asarray(width, dtype=float)
     # e_D = (u_x, 0, u_z)/V and e_L = e_D × e_y = (-u_z, 0, u_x)/V; with k = q c w / V = rho c w V / 2 no division
     # by V is needed (V = 0 gives zero loads)
@@ -256,7 +266,11 @@ def section_loads(
     lift_loc = (k * CL)[:, None] * (u_loc @ _EY_CROSS.T)  # Eq. (7): (u_x, 0, u_z) -> (-u_z, 0, u_x)
     moment = hcw * speed2 * c ** (moment_chord_power - 1.0) * CM  # Eq. (9), with c^2 by default (module docstring)
     s_ref = x_ref_over_c * c - 0.5 * geom.tube_d  # reference point along e_x from the LE node
-    share = np.clip(CL / luffing_cl, 0.0, 1.0) if luffing_cl > 0.0 else None
+    if luffing_cl > 0.0:
+        u = np.clip(CL / luffing_cl, 0.0, 1.0)
+        share = u * u * (3.0 - 2.0 * u)  # smoothstep: C1 in CL, so the Newton tangent stays continuous
+    else:
+        share = None
     f_loc = distribute(geom.local, s_ref, lift_loc + drag_loc, moment, share)
     nodal = f_loc @ geom.frames.transpose(0, 2, 1)  # rows e_x, e_y, e_z: f = f_s e_x + f_z e_z
     return SectionLoads(
@@ -281,6 +295,7 @@ def load_jacobian(
     luffing_cl: float = 0.0,
     cm_regression_ref_over_c: float = CM_REGRESSION_REF_DEFAULT,
     rotation_point_over_c: float | None = None,
+    negative_alpha: str = "bounded",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Section-wise derivative of the nodal aerodynamic forces with respect to the node positions.
 
@@ -307,7 +322,7 @@ def load_jacobian(
     base = section_loads(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev, dt, x_ref_over_c,
                          moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
                          cm_regression_ref_over_c=cm_regression_ref_over_c,
-                         rotation_point_over_c=rotation_point_over_c)
+                         rotation_point_over_c=rotation_point_over_c, negative_alpha=negative_alpha)
     tan = spanwise_directions(x_sec[:, 0])
     # stack: copy q perturbs coordinate q (= 3 b + l) of every section
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
@@ -321,7 +336,8 @@ def load_jacobian(
         v_kite, omega, rep(v_w) if v_w.ndim == 2 else v_w, rho,
         None if x_sec_prev is None else rep(x_sec_prev), dt, x_ref_over_c, spanwise=rep(tan),
         moment_chord_power=moment_chord_power, luffing_cl=luffing_cl,
-        cm_regression_ref_over_c=cm_regression_ref_over_c, rotation_point_over_c=rotation_point_over_c)
+        cm_regression_ref_over_c=cm_regression_ref_over_c, rotation_point_over_c=rotation_point_over_c,
+        negative_alpha=negative_alpha)
     df = (pert.nodal_forces.reshape(p, n_sec, p) - base.nodal_forces.reshape(1, n_sec, p)) * (1.0 / h)
     return base.nodal_forces, df.transpose(1, 2, 0).copy()
 
@@ -391,7 +407,8 @@ def section_damping(
     does no work.
 
     Parameters are those of :func:`section_loads` (``options``: its keyword arguments ``x_ref_over_c``,
-    ``moment_chord_power``, ``luffing_cl``, ``cm_regression_ref_over_c``, ``rotation_point_over_c``); ``h`` [m/s]
+    ``moment_chord_power``, ``luffing_cl``, ``cm_regression_ref_over_c``, ``rotation_point_over_c``,
+    ``negative_alpha``); ``h`` [m/s]
     is the difference step. ``x_sec_prev`` / ``dt`` must not be given: the damping replaces Eq. (3).
 
     Returns
@@ -417,3 +434,21 @@ def section_damping(
     lam, V = np.linalg.eigh(sym)
     sym_psd = np.einsum("nij,nj,nkj->nik", V, np.maximum(lam, 0.0), V)
     return sym_psd + 0.5 * (C - C.transpose(0, 2, 1))
+
+
+def oswald_efficiency(aspect_ratio: float) -> float:
+    """Span efficiency of a straight wing of aspect ratio ``AR`` (Raymer, *Aircraft Design: A Conceptual Approach*,
+    Eq. 12.48): ``e = 1.78 (1 - 0.045 AR^0.68) - 0.64`` (0.95 at the rhino16's projected AR of about 3.5)."""
+    return 1.78 * (1.0 - 0.045 * aspect_ratio**0.68) - 0.64
+
+
+def projected_planform(x_sec: np.ndarray) -> tuple[float, float]:
+    """Span ``b`` [m] and area ``S`` [m^2] of the wing projected on its x_k-y_k plane: ``b`` between the outermost
+    nodes along y_k, ``S`` the sum of the projected section strips (chord along x_k times the y_k width of each
+    strip). The aspect ratio is ``b^2 / S``."""
+    x_sec = np.asarray(x_sec, dtype=float)
+    y_le = x_sec[:, 0, 1]
+    b = float(x_sec[:, :, 1].max() - x_sec[:, :, 1].min())
+    chord_x = x_sec[:, :, 0].max(axis=1) - x_sec[:, :, 0].min(axis=1)
+    edges = np.concatenate(([y_le[0]], 0.5 * (y_le[1:] + y_le[:-1]), [y_le[-1]]))
+    return b, float(np.sum(chord_x * np.abs(np.diff(edges))))

@@ -172,8 +172,10 @@ class FlightSimulator:
         self.state = ParticleState(r, v)
         self.t = t0
         rec = self._solve_wing(first=True)
-        if cfg.dynamics.wing_mass == "distributed":
-            self.particles.set_wing_mass(condensed_wing_mass(wing, nodal_wing_mass(wing.mesh, cfg.dynamics)))
+        f = cfg.dynamics.wing_point_mass_share
+        if f < 1.0:  # the wing's mass: a share at the four points, the rest distributed and condensed (wing_mass.py)
+            M = condensed_wing_mass(wing, nodal_wing_mass(wing.mesh, cfg.dynamics), shape=rec.wing.nodes)
+            self.particles.set_wing_mass((1.0 - f) * M + f * np.diag(np.repeat(self.particles.m[:4], 3)))
         return rec
 
     def _start_wing(self, X: FlightState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -37,6 +37,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from kite_env.config import Config
+from kite_env.control import force_integral
 from kite_env.dynamics.fast import NON_FINITE, OK, SurrogateKites
 from kite_env.envs.figure_eight import INFO_FEATURES, KiteFigureEightEnv, resolve_config, reward_terms
 from kite_env.envs.observe import FEATURES, N_PARTS
@@ -99,6 +100,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self.s_hint = np.zeros(n)
         self.L_B0 = np.zeros(n)
         self.L_D0 = np.zeros(n)
+        self.force_integral = np.zeros(n)
         self.L_B = np.zeros(n)
         self.L_D = np.zeros(n)
         self._autoreset = np.zeros(n, dtype=np.bool_)
@@ -122,6 +124,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
         for name in _KITE_ROWS:
             getattr(self.kites, name)[i] = getattr(one, name)[0]
         self.L_B0[i], self.L_D0[i] = env.actuator.L_B0, env.actuator.L_D0
+        self.force_integral[i] = env.actuator.integral
         self.L_B[i], self.L_D[i] = env.L_B, env.L_D
         self.s_hint[i] = env.s_hint
         self.last_action[i] = env.last_action
@@ -182,7 +185,9 @@ class KiteFigureEightVectorEnv(VectorEnv):
         dl = ks.length[:, 1] - ks.length[:, 3]
         T = ks.tension
         mu = (T[:, 1] + T[:, 3]) / np.maximum(T[:, 0] + T[:, 2], 1e-9)  # Eq. (18)
-        L3 = -c.k3_m * (c.mu_target - mu)  # Eq. (19)
+        self.force_integral = np.where(run, force_integral(self.force_integral, c.mu_target - mu, c),
+                                       self.force_integral)
+        L3 = -c.k3_m * (c.mu_target - mu) - c.k3i_per_s * self.force_integral  # Eq. (19) + integral (control.py)
         e = dls - dl
         L_B = np.where(run, self.L_B0 + c.k2 * e + L3, self.L_B)  # Eq. (16)
         L_D = np.where(run, self.L_D0 - c.k2 * e + L3, self.L_D)  # Eq. (17)
