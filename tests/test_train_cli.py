@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import LEGACY_CONFIG
 
 from kite_env.cli import train as train_cli
 
@@ -96,7 +97,9 @@ def test_kite_bench_writes_bench_json(tmp_path, capsys):
 
     from kite_env.cli import bench
 
-    assert bench.main(["--out", str(tmp_path), "--steps", "10"]) == 0
+    # the fast fidelities on the model their reduced-order wing was fitted to (configs/legacy_v0.yaml)
+    assert bench.main(["--out", str(tmp_path), "--steps", "10", "--fast-steps", "300", "--config",
+                       str(LEGACY_CONFIG)]) == 0
     data = json.loads((tmp_path / "bench.json").read_text())
     fe = data["fe"]
     assert fe["env_steps_per_s"] > 0 and fe["real_time_factor"] > 0 and fe["steps"] == 10

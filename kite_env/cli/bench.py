@@ -18,12 +18,13 @@ import time
 from kite_env.config import ConfigError
 
 
-def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe") -> dict:
-    """Time ``n_steps`` env steps of KiteFigureEight-v0 in ``fidelity`` driven by the baseline agent."""
+def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe", config=None) -> dict:
+    """Time ``n_steps`` env steps of KiteFigureEight-v0 in ``fidelity`` driven by the baseline agent (``config``: a
+    YAML path or None for the defaults, then ``overrides``)."""
     from agents.baseline import BaselineAgent
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
-    env = KiteFigureEightEnv(overrides=overrides, fidelity=fidelity)
+    env = KiteFigureEightEnv(config=config, overrides=overrides, fidelity=fidelity)
     agent = BaselineAgent(env.cfg)
     t0 = time.perf_counter()
     obs, _ = env.reset(seed=seed)
@@ -45,7 +46,7 @@ def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "
             "control_dt_s": env.control_dt, "reset_s": t_reset, "resets_during_run": resets}
 
 
-def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: int = 0) -> dict:
+def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: int = 0, config=None) -> dict:
     """Time ``n_steps`` steps of the batched env (``n_kites`` kites in the surrogate fidelity, one process) with
     random actions; kite-steps per second = ``n_kites * n_steps / wall``."""
     import gymnasium as gym
@@ -54,7 +55,7 @@ def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: in
     import kite_env  # noqa: F401  (registers the envs)
 
     env = gym.make_vec("KiteFigureEightFast-v0", num_envs=n_kites, vectorization_mode="vector_entry_point",
-                       overrides=list(overrides))
+                       config=config, overrides=list(overrides))
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     wall = 0.0
@@ -78,6 +79,8 @@ def main(argv=None) -> int:
     p.add_argument("--n-kites", type=int, default=64, help="kites of the batched env (default 64)")
     p.add_argument("--fidelity", action="append", choices=("fe", "surrogate", "batched"), default=None,
                    help="benchmark only these (repeatable; default all)")
+    p.add_argument("--config", default=None, help="YAML config (e.g. configs/legacy_v0.yaml, the model the shipped "
+                   "reduced-order wing was fitted to); --set overrides apply on top")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     args = p.parse_args(argv)
     if args.steps <= 0:
@@ -90,11 +93,11 @@ def main(argv=None) -> int:
     result = {}
     try:
         if "fe" in which:
-            result["fe"] = bench_env(args.steps, args.set)
+            result["fe"] = bench_env(args.steps, args.set, config=args.config)
         if "surrogate" in which:
-            result["surrogate"] = bench_env(args.fast_steps, args.set, fidelity="surrogate")
+            result["surrogate"] = bench_env(args.fast_steps, args.set, fidelity="surrogate", config=args.config)
         if "batched" in which:
-            result["batched"] = bench_batched(args.n_kites, args.fast_steps, args.set)
+            result["batched"] = bench_batched(args.n_kites, args.fast_steps, args.set, config=args.config)
     except (ConfigError, FileNotFoundError, ValueError) as exc:
         print(f"kite-bench: error: {exc}", file=sys.stderr)
         return 2

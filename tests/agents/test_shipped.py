@@ -10,6 +10,7 @@ import pytest
 from agents.policies import SHIPPED, make_agent, shipped_model
 from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters, recipe_overrides
 from kite_env.envs.figure_eight import KiteFigureEightEnv
+from conftest import LEGACY_CONFIG
 from kite_env.flight import evaluation_config, run_episode
 
 SEEDS = range(2000, 2012)  # held out: training used seeds 0.. (kites) and 10,000.. (evaluations)
@@ -30,7 +31,9 @@ def _returns(spec: str, fidelity: str, seeds, duration: float = 60.0) -> list[fl
     from kite_env.config import load_config
 
     model = shipped_model(spec) if spec in SHIPPED else None
-    cfg = load_config(str(model.parent / "config.yml") if model else None,
+    # the shipped agents' own configuration, else the legacy model they were trained on (configs/legacy_v0.yaml):
+    # every policy of a comparison flies the same model and task
+    cfg = load_config(str(model.parent / "config.yml") if model else LEGACY_CONFIG,
                       [*_conditions(), f"sim.fidelity={fidelity}"])
     env = KiteFigureEightEnv(config=evaluation_config(cfg, duration, randomize=True))
     agent = make_agent(spec, env)

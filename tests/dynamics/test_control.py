@@ -21,13 +21,33 @@ def test_actuator_closes_the_steering_loop_and_the_force_loop():
     assert info["mu"] == pytest.approx(0.3) and info["L3"] == pytest.approx(0.0)
     # dl* > dl = 0: the right line is lengthened and the left one shortened by K2 (dl* - dl) (Eq. 16-17)
     assert L_B - 25.2 == pytest.approx(cfg.k2 * 0.1) and 25.2 - L_D == pytest.approx(cfg.k2 * 0.1)
-    # mu below mu*: both steering lines shorter by K3 (mu* - mu) (Eq. 19)
+    # mu below mu*: both steering lines shorter by K3 (mu* - mu) (Eq. 19) plus K3i times the integral of the error
     T_low = np.array([1000.0, 200.0, 1000.0, 200.0])
     L_B2, L_D2, info2 = act.rest_lengths(0.0, lengths, T_low)
-    assert L_B2 - 25.2 == pytest.approx(-cfg.k3_m * 0.1) and L_D2 == pytest.approx(L_B2)
+    I1 = 0.1 * cfg.control_dt_s
+    assert L_B2 - 25.2 == pytest.approx(-cfg.k3_m * 0.1 - cfg.k3i_per_s * I1) and L_D2 == pytest.approx(L_B2)
+    L_B3, _, _ = act.rest_lengths(0.0, lengths, T_low)  # the integral grows while the error persists
+    assert L_B3 - 25.2 == pytest.approx(-cfg.k3_m * 0.1 - cfg.k3i_per_s * 2 * I1)
+    # the paper's proportional loop (K3i = 0)
+    p_act = LineActuator(dataclasses.replace(cfg, k3i_per_s=0.0), 25.2, 25.2)
+    for _ in range(3):
+        L_B4, _, _ = p_act.rest_lengths(0.0, lengths, T_low)
+        assert L_B4 - 25.2 == pytest.approx(-cfg.k3_m * 0.1)
     # the desired difference is limited
     _, _, info3 = act.rest_lengths(10.0, lengths, T)
     assert info3["delta_l_star"] == cfg.delta_l_max_m
+
+
+def test_force_integral_is_clamped_against_windup():
+    """The integral term |K3i I| never exceeds control.force_integral_max_m, however long the error persists."""
+    cfg = ControlConfig()
+    act = LineActuator(cfg, 25.2, 25.2)
+    lengths = np.array([25.1, 25.3, 25.1, 25.3])
+    T_zero = np.array([1000.0, 0.0, 1000.0, 0.0])  # both steering lines slack: mu = 0
+    for _ in range(10000):
+        L_B, _, _ = act.rest_lengths(0.0, lengths, T_zero)
+    assert abs(cfg.k3i_per_s * act.integral) == pytest.approx(cfg.force_integral_max_m)
+    assert L_B - 25.2 == pytest.approx(-cfg.k3_m * 0.3 - cfg.force_integral_max_m)
 
 
 def test_baseline_policy_signs_and_blending():

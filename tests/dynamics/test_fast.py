@@ -21,8 +21,9 @@ from kite_env.wind import WindConfig, WindField
 
 
 @pytest.fixture(scope="module")
-def setup():
-    cfg = Config()
+def setup(legacy_cfg):
+    """The legacy model (configs/legacy_v0.yaml): the FE model the shipped reduced-order wing was fitted to."""
+    cfg = legacy_cfg
     wing = nominal_wing(cfg.kite.name, cfg)
     return cfg, wing, load_default(cfg.kite.name), Lemniscate(cfg.trajectory)
 
@@ -120,8 +121,9 @@ def test_batched_kites_equal_single_kites(setup):
 
 
 def test_agrees_with_full_model_over_a_short_flight(setup):
-    """From the same start (FE), 0.6 s of straight flight: tether force within 12 % (the shipped model flies with
-    about 7 % more traction than the FE model, README), speed within 6 %, KCU position within 1 m."""
+    """From the same start (FE), 0.6 s of straight flight in the model the surrogate was fitted to: tether force
+    within 3 %, speed within 3 %, KCU position within 0.3 m (the bounds of issue 5; measured +1.9 %, +0.8 %,
+    0.13 m)."""
     cfg, wing, sw, path = setup
     fe = FlightSimulator(cfg, WindField(cfg.wind), nominal_wing(cfg.kite.name, cfg))  # fresh wings: the FE start
     sur = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=sw, wing=nominal_wing(cfg.kite.name, cfg),
@@ -130,9 +132,9 @@ def test_agrees_with_full_model_over_a_short_flight(setup):
     np.testing.assert_array_equal(r_fe.state.r, r_s.state.r)
     for _ in range(120):
         a, b = fe.step(fe.L_B0, fe.L_D0), sur.step(sur.L_B0, sur.L_D0)
-    assert abs(b.tether_force / a.tether_force - 1.0) < 0.12
-    assert abs(np.linalg.norm(b.v_kite) / np.linalg.norm(a.v_kite) - 1.0) < 0.06
-    assert np.linalg.norm(b.state.r[4] - a.state.r[4]) < 1.0  # of 17 m flown
+    assert abs(b.tether_force / a.tether_force - 1.0) < 0.03
+    assert abs(np.linalg.norm(b.v_kite) / np.linalg.norm(a.v_kite) - 1.0) < 0.03
+    assert np.linalg.norm(b.state.r[4] - a.state.r[4]) < 0.3  # of 17 m flown
 
 
 def test_outside_the_envelope_raises_or_falls_back(setup):

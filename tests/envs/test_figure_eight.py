@@ -63,9 +63,12 @@ def test_same_seed_same_rollout_and_pickle():
 
 
 def test_reward_terms_sum_and_info():
+    """Reward terms sum to the reward. The actions step dl* by +-0.125 m, as 0.5 did with the former 0.25 m limit: a
+    full-range swing of the 1.5 m limit within two control periods breaks the quasi-static wing (the next issue, a
+    wing with inertia, makes every action total)."""
     env = KiteFigureEightEnv(overrides=["env.w_action_rate=1.0"])
     env.reset(seed=0)
-    for a in (0.5, -0.5, 0.0):
+    for a in (1.0 / 12.0, -1.0 / 12.0, 0.0):
         obs, r, term, trunc, info = env.step(np.array([a], np.float32))
         parts = [info[k] for k in ("reward_tracking", "reward_traction", "reward_action", "reward_crash")]
         assert r == pytest.approx(sum(parts), rel=0, abs=1e-12)
@@ -198,16 +201,15 @@ def test_observation_terms_are_configurable():
 
 
 @pytest.mark.slow
-def test_baseline_through_the_env_beats_random_and_straight():
-    """One evaluation path: the paper's controller via predict() against random steering and dl* = 0, over the
-    first 4 s at the paper's conditions (return and tracking). The full model's baseline leaves the figure in its
-    first turn (issue 3, README "Flight dynamics"), so this compares the policies before that. Tracking is not
-    compared: over the first 4 s flying straight along the initial tangent stays as close to the path as the
-    baseline, which turns too slowly in this model."""
-    def run(policy, seed=0, horizon_s=4.0):
+def test_baseline_through_the_env_flies_a_whole_figure_eight_and_beats_random_and_straight():
+    """One evaluation path: the paper's controller via predict() against random steering and dl* = 0 at the paper's
+    conditions. Over 22 s (one whole figure-eight of about 18.5 s after the start) the baseline flies to the time
+    limit, tracks the path within 5 deg RMS (measured 3.6 deg over 60 s) and earns more return than either; flying
+    straight leaves the figure and ends on the ground or far from the path."""
+    def run(policy, seed=0, horizon_s=22.0):
         env = KiteFigureEightEnv(overrides=[f"env.max_episode_s={horizon_s}"])
         obs, _ = env.reset(seed=seed)
-        start, ret, dist = True, 0.0, []
+        start, ret, dist, s_path = True, 0.0, [], []
         while True:
             a, _ = policy(obs, start)
             start = False
@@ -223,4 +225,6 @@ def test_baseline_through_the_env_beats_random_and_straight():
     rand = run(lambda o, s: (rng.uniform(-1, 1, 1).astype(np.float32), None))
     zero = run(lambda o, s: (np.zeros(1, np.float32), None))
     assert base[2] == "time limit"
+    assert base[1] < 5.0
     assert base[0] > rand[0] and base[0] > zero[0]
+    assert base[1] < zero[1]

@@ -5,11 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kite_env.config import Config
+from kite_env.config import load_config
 from kite_env.fsi import FlightState
 from kite_env.surrogate.model import SurrogateWing, output_errors
 from kite_env.surrogate.samples import (INPUT_NAMES, OUTPUT_NAMES, StateSampler, WingSamples, admissible, features,
                                         flight_state, targets)
+from conftest import LEGACY_CONFIG  # noqa: E402
+
+#: the model the shipped reduced-order wing and its start table were built on (configs/legacy_v0.yaml)
+LEGACY = load_config(LEGACY_CONFIG)
 
 
 def _rot(axis, angle):
@@ -58,7 +62,7 @@ def short_flight_samples():
     from agents.policies import make_agent
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
-    env = KiteFigureEightEnv(overrides=["env.max_episode_s=0.06"])
+    env = KiteFigureEightEnv(config=LEGACY, overrides=["env.max_episode_s=0.06"])
     recs = []
 
     class Both(StateSampler):  # keep the records to compare with
@@ -100,7 +104,7 @@ def test_wing_depends_on_the_apparent_velocity_only():
     """Sampling stores v_kite - v_wind: the wing's loads must not depend on v_kite and v_wind separately."""
     from kite_env.polar import nominal_wing
 
-    wing = nominal_wing("rhino16", Config())
+    wing = nominal_wing("rhino16", LEGACY)
     X1 = FlightState(v_kite=np.array([-22.0, 0.0, -4.0]), omega=np.zeros(3), v_wind=np.array([3.0, 0.0, 1.5]))
     s1 = wing.solve(None, X1, support="lines", warm=False)
     X2 = FlightState(v_kite=X1.v_kite - X1.v_wind, omega=X1.omega, v_wind=np.zeros(3))

@@ -5,17 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kite_env.config import Config
+from kite_env.config import load_config
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError
 from kite_env.surrogate import start
 from kite_env.surrogate.start import StartTable, build_start_table
+
+from conftest import LEGACY_CONFIG  # noqa: E402
+
+#: the model the shipped reduced-order wing and its start table were built on (configs/legacy_v0.yaml)
+LEGACY = load_config(LEGACY_CONFIG)
 
 S_GRID, W_GRID = (20.0, 22.0), (-6.0, -4.0)
 
 
 @pytest.fixture(scope="module")
 def table():
-    return build_start_table(Config(), S_GRID, W_GRID)
+    return build_start_table(LEGACY, S_GRID, W_GRID)
 
 
 class _Uniform:
@@ -36,7 +41,7 @@ def test_grid_node_is_the_reset_of_the_full_model(table):
     V = 4.0 / np.cos(el)  # w = -v_wind . R0 = -V cos(el)
     tang = V * np.sin(el)  # |tangential part of the wind|, perpendicular to the flight direction e_t = y
     speed = np.sqrt(22.0**2 - tang**2)  # s = |v0 - tangential wind|
-    sim = FlightSimulator(Config(), _Uniform([V, 0.0, 0.0]))
+    sim = FlightSimulator(LEGACY, _Uniform([V, 0.0, 0.0]))
     sim.reset(R0, np.array([0.0, 1.0, 0.0]), speed_mps=speed)
     q0, F_b, k = table.lookup(np.array([-22.0, 0.0, -4.0]))
     np.testing.assert_allclose(k, sim.pair_stiffness, rtol=1e-6)
@@ -79,7 +84,7 @@ def _fake(cfg, s, w):
 
 def test_non_converged_points_are_nan_and_refused_near_them(monkeypatch, tmp_path):
     monkeypatch.setattr(start, "start_state", _fake)
-    t = build_start_table(Config(), [10.0, 20.0, 30.0], [-10.0, -5.0, 0.0])
+    t = build_start_table(LEGACY, [10.0, 20.0, 30.0], [-10.0, -5.0, 0.0])
     assert t.meta["n_failed"] == 1 and t.meta["failed"][0]["s"] == 30.0 and t.meta["failed"][0]["w"] == 0.0
     assert np.isnan(t.q0[2, 2]).all() and t.converged.sum() == 8
     # bilinear interpolation is exact for these functions anywhere in the converged cells
@@ -136,7 +141,7 @@ def test_table_only_start_fails_where_the_table_has_no_cell_and_the_env_redraws(
 
     el = np.radians(30.0)
     R0 = np.array([np.cos(el), 0.0, np.sin(el)])
-    sim = SurrogateFlightSimulator(Config(), _Uniform([4.0 / np.cos(el), 0.0, 0.0]), start="table_only",
+    sim = SurrogateFlightSimulator(LEGACY, _Uniform([4.0 / np.cos(el), 0.0, 0.0]), start="table_only",
                                    start_table=table)
     with pytest.raises(SimulationError, match="no tabulated start"):
         sim.reset(R0, np.array([0.0, 1.0, 0.0]), speed_mps=30.0)  # s ~ 30 m/s: beyond the 20-22 m/s grid
