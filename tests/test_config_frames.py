@@ -94,3 +94,18 @@ def test_kite_frame_rates_in_floats_equal_the_array_formulas():
             np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-12)
     with pytest.raises(ValueError, match=r"\(4, 3\)"):
         kite_frame_rates(base[:3], base[:3])
+
+
+def test_agent_recipes_pin_the_legacy_model_the_fast_fidelity_was_fitted_to():
+    """configs/agents/*.yaml fly the fast fidelity on configs/legacy_v0.yaml's model: every key of that file is
+    pinned by each recipe's env entry, with the same value."""
+    import yaml
+
+    from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters
+
+    root = Path(__file__).resolve().parents[1] / "configs"
+    legacy = yaml.safe_load((root / "legacy_v0.yaml").read_text())
+    flat = {f"{sec}.{k}": v for sec, vals in legacy.items() for k, v in vals.items() if k != "induced_drag"}
+    for algo in ("ppo", "sac"):
+        env = load_hyperparameters(root / "agents" / f"{algo}.yaml", algo, FAST_ENV_ID)["env"]
+        assert {k: env[k] for k in flat} == flat

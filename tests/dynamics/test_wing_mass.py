@@ -23,19 +23,10 @@ from kite_env.fsi import FlightState
 from kite_env.polar import nominal_wing
 from kite_env.structure import kernels as structure_kernels
 
+from test_flight import UniformWind  # noqa: E402  (the same uniform wind as the flight tests)
+
 TOTAL_KG = 10.0  # 2 (m_A + m_B), Table 1
 needs_numba = pytest.mark.skipif(not structure_kernels.NUMBA_AVAILABLE, reason="numba not installed")
-
-
-class UniformWind:
-    def __init__(self, speed=5.0):
-        self.speed = speed
-
-    def velocity(self, t, r):
-        r = np.asarray(r, dtype=float)
-        out = np.zeros(r.shape)
-        out[..., 0] = self.speed
-        return out
 
 
 def mirror_index(nodes):
