@@ -1,6 +1,6 @@
 """Open-loop steering authority of the full model: yaw rate per steering input at a few wind speeds.
 
-    python scripts/turn_rate.py [--dl -0.2,0.1,0.2,0.3] [--wind 5,7] [--set section.key=value ...]
+    python scripts/turn_rate.py [--dl=-0.2,0.1,0.2,0.3] [--wind 5,7] [--set section.key=value ...]
 
 Prints a table of the neutral-subtracted yaw rate psi_dot per held steering-line difference dL = L_B - L_D
 (kite_env.turn_rate): about 5 rad/s per m in the paper's Fig. 16, 2.5-5 in V3 flight data.
@@ -17,7 +17,7 @@ def main(argv=None) -> int:
     from kite_env.turn_rate import turn_rate_table
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--dl", default="-0.2,0.1,0.2,0.3", help="held inputs L_B - L_D [m], comma separated")
+    p.add_argument("--dl", default="-0.2,0.1,0.2,0.3", help="held inputs L_B - L_D [m], comma separated (write --dl=-0.2,0.1 when the first is negative)")
     p.add_argument("--wind", default="5", help="wind speeds [m/s], comma separated")
     p.add_argument("--set", action="append", default=[], help="config override section.key=value (repeatable)")
     args = p.parse_args(argv)
