@@ -334,9 +334,12 @@ class AeroelasticWing:
         iteration of a quantity that reduces its own source)."""
         v_a = flight.v_kite - flight.v_wind
         V = float(np.linalg.norm(v_a))
+        if V <= 0.0:
+            self._downwash = None
+            return 0.0
         lift_vec = sol.aero_force - (sol.aero_force @ v_a) / (V * V) * v_a  # perpendicular to the free stream
         L = float(np.linalg.norm(lift_vec))
-        if V <= 0.0 or L <= 0.0:
+        if L <= 0.0:
             self._downwash = None
             return 0.0
         CL = L / (0.5 * self.cfg.aero.rho_kg_m3 * V * V * self.planform_area_m2)
@@ -348,7 +351,6 @@ class AeroelasticWing:
         self._downwash = (alpha_i, lift_vec / L)
         self._last_downwash_change = abs(alpha_i - old)
         return self._last_downwash_change
-
 
     def _eq3(self, dt: float | None) -> bool:
         """The paper's Eq. (3) as printed: the deformation velocity enters the section inflow."""
