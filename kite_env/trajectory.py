@@ -331,7 +331,10 @@ def solve_chart_parameters(width: float, height: float, elev: float) -> tuple[fl
         jac = np.empty((2, 2))
         jac[:, 0] = (np.array(lemniscate_spans(a + eps, b, elev)) - target - f0) / eps
         jac[:, 1] = (np.array(lemniscate_spans(a, b + eps, elev)) - target - f0) / eps
-        step = np.linalg.solve(jac, -f0)
+        try:
+            step = np.linalg.solve(jac, -f0)
+        except np.linalg.LinAlgError:  # the spans stopped responding to a, b: the height is out of reach
+            break
         # damping: keep a, b positive and moves moderate
         scale = min(1.0, 0.5 * a / max(abs(step[0]), 1e-300), 0.5 * b / max(abs(step[1]), 1e-300))
         a, b = a + scale * step[0], b + scale * step[1]

@@ -241,9 +241,12 @@ def test_config_validation(kwargs, match):
         TrajectoryConfig(**kwargs)
 
 
-def test_unreachable_height_is_reported():
+@pytest.mark.parametrize("w, h, e", [(40.0, 30.0, 30.0), (100.0, 44.0, 40.0), (110.0, 44.0, 40.0)])
+def test_unreachable_height_is_reported(w, h, e):
+    """One message naming the keys, also where the Newton iteration's Jacobian turns singular (100 x 44 at 40 deg
+    raised numpy's bare 'Singular matrix')."""
     with pytest.raises(ValueError, match="not reachable"):
-        Lemniscate(TrajectoryConfig(width_deg=40.0, height_deg=30.0, elevation_deg=30.0))
+        Lemniscate(TrajectoryConfig(width_deg=w, height_deg=h, elevation_deg=e))
 
 
 def test_heading_of_one_vector_equals_the_vectorised_formula():
