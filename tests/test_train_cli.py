@@ -177,16 +177,19 @@ def test_vec_env_kind_defaults_and_errors(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def batched_runs(tmp_path_factory):
     """Tiny PPO runs on 4 batched fast kites: seed 5 twice, seed 6 once, and seed 5 stopped at 32 steps then
-    resumed to 64."""
+    resumed to 64. The resumed run's episodes last at most 0.1 s (5 steps), so that each part (8 steps per kite)
+    completes episodes and the monitor file's continuation can be checked."""
     base = tmp_path_factory.mktemp("batched")
     recipe = _recipe(base, "ppo")
     rc = {}
+    short = ["--set", "env.max_episode_s=0.1"]
     for name, seed, steps in (("ppo_a", 5, 64), ("ppo_b", 5, 64), ("ppo_c", 6, 64), ("ppo_r", 5, 32)):
         rc[name] = train_cli.main(["--algo", "ppo", "--timesteps", str(steps), "--out", str(base / name),
                                    "--config", recipe, "--seed", str(seed), "--set", "env.wind_speed_max_mps=7.5",
-                                   *FAST])
+                                   *FAST, *(short if name == "ppo_r" else [])])
     rc["ppo_r2"] = train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(base / "ppo_r"), "--config",
-                                   recipe, "--seed", "5", "--resume", "--set", "env.wind_speed_max_mps=7.5", *FAST])
+                                   recipe, "--seed", "5", "--resume", "--set", "env.wind_speed_max_mps=7.5", *FAST,
+                                   *short])
     return base, rc
 
 
@@ -228,10 +231,14 @@ def test_batched_run_resumes_from_its_checkpoint(batched_runs):
     assert PPO.load(out / "model.zip", device="cpu").num_timesteps == 64
     assert {"model_32_steps.zip", "model_64_steps.zip", "model_vecnormalize_32_steps.pkl"} <= {
         p.name for p in (out / "checkpoints").iterdir()}
-    # the monitor file goes on: the first part's episodes stay, the resumed part's are appended
+    # the monitor file goes on: the first part's episodes stay, the resumed part's are appended. Each part runs 8
+    # steps per kite and completes at least one 5-step episode per kite; more than 32 steps of complete episodes in
+    # the file means both parts' episodes are there (the resumed part alone has 32 steps)
     lines = (out / "monitor.csv").read_text().splitlines()
     assert sum(ln == "r,l,t" for ln in lines) == 1
-    assert int(sum(float(ln.split(",")[1]) for ln in lines[2:])) <= 64
+    lengths = [int(float(ln.split(",")[1])) for ln in lines[2:]]
+    assert len(lengths) >= 8 and all(1 <= n <= 5 for n in lengths)
+    assert 32 < sum(lengths) <= 64
 
 
 def test_batched_sac_with_held_out_evaluations(tmp_path):
