@@ -27,8 +27,7 @@ from kite_env.wind import WindField
 @dataclass(frozen=True)
 class TurnRate:
     """One open-loop flight: held input ``dl_m`` [m], mean yaw rate [rad/s] in the window (raw, not
-    neutral-subtracted), mean airspeed [m/s], mean twist of the tips [rad] (right minus left tip-rod pitch about
-    y_k), and how the flight ended (``"ok"`` or the failure reason)."""
+    neutral-subtracted), mean airspeed [m/s], how the flight ended (``"ok"`` or the failure reason) and when [s]."""
 
     dl_m: float
     yaw_rate_rad_s: float

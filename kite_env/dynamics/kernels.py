@@ -59,8 +59,8 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
 
 
 #: length of the work array of :func:`particle_accelerations_into` (R 9, f_K 12, dq 12, f 15, e 12, l 4, T 4, fp 12,
-#: minv 5; wing inertia: f in K 12, M^-1 f in K 12, M^-1 G^T of the two tip constraints 24)
-_WORK = 133
+#: minv 5; wing inertia: f in K 12, M^-1 f in K 12, M^-1 G^T of the two tip constraints 24, their G rows 24)
+_WORK = 157
 
 
 @njit(**_JIT)
@@ -112,7 +112,7 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
     a : (5, 3) float [m/s^2], output
     lam : (3,) float, output
         Lagrange multipliers of the tether, A-B and C-D constraints (``M a = f + G^T lam``).
-    work : (85,) float, scratch
+    work : (_WORK,) float, scratch
     """
     R = work[0:9].reshape((3, 3))  # views into work (no allocation)
     f_K = work[9:21].reshape((4, 3))
@@ -285,26 +285,17 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
     for k in range(3):
         a[_KCU, k] += minv[_KCU] * (r[_KCU, k] * lam[0])
     if wing_inertia:
-        _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, work[109:133].reshape((2, 12)))
+        _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, work[109:133].reshape((2, 12)),
+                           work[133:157].reshape((2, 4, 3)))
         return
     # tip beams: G = [... d ... -d ...] at (i, j) = (A, B), (C, D)
     for c in range(1, 3):
         i = 2 * (c - 1)
         j = i + 1
-        L = tip_lengths[c - 1]
-        d0 = r[i, 0] - r[j, 0]
-        d1 = r[i, 1] - r[j, 1]
-        d2 = r[i, 2] - r[j, 2]
-        dv0 = v[i, 0] - v[j, 0]
-        dv1 = v[i, 1] - v[j, 1]
-        dv2 = v[i, 2] - v[j, 2]
-        g = 0.5 * ((d0 * d0 + d1 * d1 + d2 * d2) - L * L)
-        gdot_v = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
-        Gv = d0 * v[i, 0] + d1 * v[i, 1] + d2 * v[i, 2] - d0 * v[j, 0] - d1 * v[j, 1] - d2 * v[j, 2]
-        Ga = d0 * a[i, 0] + d1 * a[i, 1] + d2 * a[i, 2] - d0 * a[j, 0] - d1 * a[j, 1] - d2 * a[j, 2]
+        d0, d1, d2, rhs = _tip_constraint(r, v, a, i, j, tip_lengths[c - 1], alpha)
         S = (d0 * minv[i] * d0 + d1 * minv[i] * d1 + d2 * minv[i] * d2
              + d0 * minv[j] * d0 + d1 * minv[j] * d1 + d2 * minv[j] * d2)
-        lc = (-gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga) / S
+        lc = rhs / S
         lam[c] = lc
         a[i, 0] += minv[i] * (d0 * lc)
         a[i, 1] += minv[i] * (d1 * lc)
@@ -312,6 +303,24 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         a[j, 0] += minv[j] * (-d0 * lc)
         a[j, 1] += minv[j] * (-d1 * lc)
         a[j, 2] += minv[j] * (-d2 * lc)
+
+
+@njit(**_JIT)
+def _tip_constraint(r, v, a, i, j, L, alpha):
+    """Tip-beam constraint ``g = 1/2 (|d|^2 - L^2)``, ``d = r_i - r_j``: ``d`` (three floats) and the right-hand side
+    of ``G a_c = -dG/dt v - 2 alpha G v - alpha^2 g - G a`` for the constraint correction ``a_c`` of the
+    unconstrained accelerations ``a`` (Baumgarte)."""
+    d0 = r[i, 0] - r[j, 0]
+    d1 = r[i, 1] - r[j, 1]
+    d2 = r[i, 2] - r[j, 2]
+    dv0 = v[i, 0] - v[j, 0]
+    dv1 = v[i, 1] - v[j, 1]
+    dv2 = v[i, 2] - v[j, 2]
+    g = 0.5 * ((d0 * d0 + d1 * d1 + d2 * d2) - L * L)
+    gdot_v = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
+    Gv = d0 * v[i, 0] + d1 * v[i, 1] + d2 * v[i, 2] - d0 * v[j, 0] - d1 * v[j, 1] - d2 * v[j, 2]
+    Ga = d0 * a[i, 0] + d1 * a[i, 1] + d2 * a[i, 2] - d0 * a[j, 0] - d1 * a[j, 1] - d2 * a[j, 2]
+    return d0, d1, d2, -gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga
 
 
 @njit(**_JIT)
@@ -345,31 +354,22 @@ def _wing_inertia_free(f, R, minv_K, gravity, a, fk, t):
 
 
 @njit(**_JIT)
-def _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, w):
+def _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, w, gd):
     """Multipliers of the two tip-beam constraints (A-B, C-D) with the non-diagonal wing mass: both share the wing's
-    mass, so ``S = G M^-1 G^T`` is a full 2 x 2 matrix; ``a += M^-1 G^T lam``."""
+    mass, so ``S = G M^-1 G^T`` is a full 2 x 2 matrix; ``a += M^-1 G^T lam``. ``w`` (2, 12) and ``gd`` (2, 4, 3)
+    are scratch (the columns ``M^-1 G^T`` and the rows of ``G``)."""
     rhs0 = 0.0
     rhs1 = 0.0
-    gd = np.zeros((2, 4, 3))
     for c in range(2):
         i = 2 * c
         j = i + 1
-        L = tip_lengths[c]
-        d0 = r[i, 0] - r[j, 0]
-        d1 = r[i, 1] - r[j, 1]
-        d2 = r[i, 2] - r[j, 2]
-        dv0 = v[i, 0] - v[j, 0]
-        dv1 = v[i, 1] - v[j, 1]
-        dv2 = v[i, 2] - v[j, 2]
-        g = 0.5 * ((d0 * d0 + d1 * d1 + d2 * d2) - L * L)
-        gdot_v = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
-        Gv = d0 * dv0 + d1 * dv1 + d2 * dv2
-        Ga = d0 * (a[i, 0] - a[j, 0]) + d1 * (a[i, 1] - a[j, 1]) + d2 * (a[i, 2] - a[j, 2])
-        rhs = -gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga
+        d0, d1, d2, rhs = _tip_constraint(r, v, a, i, j, tip_lengths[c], alpha)
         if c == 0:
             rhs0 = rhs
         else:
             rhs1 = rhs
+        for q in range(4):
+            gd[c, q, 0] = gd[c, q, 1] = gd[c, q, 2] = 0.0
         gd[c, i, 0], gd[c, i, 1], gd[c, i, 2] = d0, d1, d2
         gd[c, j, 0], gd[c, j, 1], gd[c, j, 2] = -d0, -d1, -d2
         _minv_W(R, minv_K, gd[c], w[c])
