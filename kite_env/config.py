@@ -114,6 +114,18 @@ class DynamicsConfig:
     gravity_mps2: float = 9.81  # [m/s^2]
     dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
     baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
+    # ground station (FlightSimulator, docs/flight_model.md section 11): "fixed" = the paper's constant tether
+    # length; "force" = a winch in force control reeling out (traction phase), the reel-out speed following
+    # (F_t - winch_force_N) / winch_damping_Ns_per_m within [0, winch_speed_max_mps] with the time constant
+    # winch_time_constant_s (after the winch models of Fechner et al. 2015, Renewable Energy 83, 705, and the
+    # force-limited reel-out of van der Vlugt et al. 2019, Renewable Energy 131, 83)
+    winch: str = "fixed"
+    winch_force_N: float = 8000.0  # set tether force of the reel-out [N]
+    winch_damping_Ns_per_m: float = 1000.0  # tether force rise per m/s of reel-out speed [N s/m]
+    winch_speed_max_mps: float = 10.0  # [m/s]
+    winch_time_constant_s: float = 0.5  # lag of the reel-out speed behind its set value [s]
+    # a step whose wing solve fails is split in halves, down to dt / 2**max_substep_halvings (FlightSimulator.step)
+    max_substep_halvings: int = 4  # [-]
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
     # share of Table 1's wing mass kept as the paper's four point masses at A-D; the rest is spread over the FE nodes
     # (70 % on the LE tube) and condensed onto A-D with the wing's static modes (dynamics/wing_mass.py). 1 = the
@@ -218,7 +230,8 @@ _POSITIVE = {
     "fsi.accept_force_rel",
     "dynamics.mass_le_kg", "dynamics.mass_te_kg", "dynamics.mass_kcu_kg", "dynamics.line_diameter_m",
     "dynamics.line_stiffness_N_per_m", "dynamics.power_line_length_m", "dynamics.tether_length_m", "dynamics.dt_s",
-    "dynamics.baumgarte_1_per_s", "control.k2", "control.delta_l_max_m", "control.beta_distance_deg",
+    "dynamics.baumgarte_1_per_s", "dynamics.winch_force_N", "dynamics.winch_damping_Ns_per_m",
+    "dynamics.winch_speed_max_mps", "dynamics.winch_time_constant_s", "control.k2", "control.delta_l_max_m", "control.beta_distance_deg",
     "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps", "env.max_episode_s", "env.force_scale_N",
     "env.tracking_scale_deg", "env.traction_ref_N", "env.initial_speed_min_mps", "env.initial_speed_max_mps",
     "env.reset_attempts", "env.start_curvature_max",
@@ -227,7 +240,7 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "fsi.max_retries", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
+    "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
@@ -337,6 +350,8 @@ def _validate(cfg: Config) -> None:
     if cfg.sim.surrogate_start not in ("table", "fe", "table_only"):
         raise ConfigError("config key 'sim.surrogate_start' must be 'table', 'fe' or 'table_only', got "
                           f"{cfg.sim.surrogate_start!r}")
+    if cfg.dynamics.winch not in ("fixed", "force"):
+        raise ConfigError(f"config key 'dynamics.winch' must be 'fixed' or 'force', got {cfg.dynamics.winch!r}")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

@@ -120,7 +120,8 @@ class FlightRecorder:
             "elevation": float(elevation(r[4])), "azimuth": float(azimuth(r[4])),
             "psi": float(heading_angle(r[4], -R[:, 0])), "course": float(course_angle(r[4], rec.v_kite)),
             "path_s": self.s_unwrapped, "path_distance": near.distance_rad, "newton_iters": rec.wing.newton_iters,
-            "wall_time": t_step, "constraint_drift": rec.constraint_drift,
+            "wall_time": t_step, "constraint_drift": rec.constraint_drift, "substeps": rec.substeps,
+            "tether_length": rec.tether_length, "reel_speed": rec.reel_speed,
         }
         for key, val in row.items():
             self.rows.setdefault(key, []).append(np.array(val, dtype=float, copy=True))

@@ -32,6 +32,8 @@ from kite_env.flight import FlightLog
 TWO_PI = 2.0 * math.pi
 #: fewest upper-half samples for the yaw-rate / steering-input fit
 MIN_FIT_SAMPLES = 10
+#: a steering line below this tension counts as slack [N]
+SLACK_LINE_N = 50.0
 
 # Paper values (Bosch et al., Sect. IV; figure numbers of the paper): (key, quantity, paper value, unit, source).
 # A pair is a range (min, max); a single number an average or typical value.
@@ -215,6 +217,9 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
     mu = s("mu")
     m["force_ratio_mu_min"] = _stat(mu, np.min)
     m["force_ratio_mu_max"] = _stat(mu, np.max)
+    T_lines = s("line_tension")
+    m["steering_line_slack_fraction"] = _num(np.mean(np.min(T_lines[:, [1, 3]], axis=1) < SLACK_LINE_N)) \
+        if T_lines.ndim == 2 and len(T_lines) else None
     steer = s("steering_input")
     m["steering_input_max_m"] = _stat(steer, lambda a: np.max(np.abs(a)))
     upper = s("elevation") > math.radians(cfg.trajectory.elevation_deg)
@@ -244,6 +249,15 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
         wt[0] = np.nan  # row 0 is the initial state: no step was taken
     m["wall_time_per_step_ms_median"] = _stat(wt[win] * 1e3, np.median)
     m["constraint_drift_max_m"] = _stat(np.abs(s("constraint_drift")), np.max)
+    # physics steps made in halves because the wing failed at the full step (FlightSimulator.step), whole flight
+    m["substepped_steps"] = int(np.sum(_series(log, "substeps") > 1)) if "substeps" in log.series else None
+
+    # ground station (dynamics.winch): tether length, reel-out speed and the mechanical power F_t v_r at the drum
+    if "tether_length" in log.series:
+        v_r = s("reel_speed")
+        m["tether_length_end_m"] = _num(_series(log, "tether_length")[-1])
+        m["reel_out_speed_mean_mps"] = _stat(v_r, np.mean)
+        m["reel_out_power_mean_W"] = _stat(tf * v_r, np.mean)
 
     m["paper_comparison"] = paper_comparison(m)
     return m

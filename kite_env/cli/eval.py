@@ -65,7 +65,7 @@ POLICIES = ("baseline", "random", "constant:<value>", "ppo", "sac", "<path to mo
 #: per-episode columns of ``episodes.csv`` / ``episode_rows`` taken from the episode's metrics
 EPISODE_METRICS = ("sim_time_s", "crashed", "termination_reason", "figure_eights_completed", "tracking_error_rms_deg",
                    "tether_force_mean_N", "tether_force_max_N", "kite_speed_min_mps", "kite_speed_max_mps",
-                   "lift_to_drag_mean", "alpha_mid_mean_deg", "real_time_factor")
+                   "lift_to_drag_mean", "alpha_mid_mean_deg", "real_time_factor", "substepped_steps")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -139,8 +139,14 @@ def summary(metrics: dict) -> str:
         ("yaw rate vs steering: r, slope", f"{_fmt(metrics['yaw_rate_steering_corr'])}, "
                                            f"{_fmt(metrics['yaw_rate_steering_slope_deg_s_per_m'])} deg/s per m"),
         ("steering input max [m]", _fmt(metrics["steering_input_max_m"])),
+        ("steering line slack (< 50 N), share of time", _fmt(metrics.get("steering_line_slack_fraction"))),
         ("Newton iterations (mean)", _fmt(metrics["newton_iters_mean"])),
+        ("steps made in halves", _fmt(metrics.get("substepped_steps"))),
     ]
+    if metrics.get("reel_out_speed_mean_mps"):  # dynamics.winch = force
+        rows.append(("reel-out: mean speed [m/s], power [kW], tether end [m]",
+                     f"{_fmt(metrics['reel_out_speed_mean_mps'])}, "
+                     f"{_fmt(metrics['reel_out_power_mean_W'] * 1e-3)}, {_fmt(metrics['tether_length_end_m'], '.1f')}"))
     width = max(len(k) for k, _ in rows)
     lines = [f"  {k:<{width}}  {v}" for k, v in rows]
     comp = metrics.get("paper_comparison", [])

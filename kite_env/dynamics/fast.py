@@ -321,7 +321,7 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
         for c in range(3):
             F0[i, c] = -yk[3 * i + c]
     particle_accelerations_into(rk, vk, wind5, F0, F0, 0.0, True, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd,
-                                line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity,
+                                line_diameter, tether_diameter, tether_length, 0.0, tip_lengths, pair_damping, gravity,
                                 alpha, zero_K, False, a, lam, work)
 
 
@@ -393,7 +393,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                     ok = False
         t[k] = t[k] + dt
         if ok:
-            rp, vp = project_constraints(rs, vn, m, tether_length, tip_lengths, 3)
+            rp, vp = project_constraints(rs, vn, m, tether_length, tip_lengths, 3, 0.0)
         else:
             rp, vp = rs, vn
         for i in range(5):
@@ -429,13 +429,16 @@ class SurrogateKites:
     def __init__(self, cfg, surrogate, q_design: np.ndarray, tip_lengths, n: int, envelope_margin: float = 0.1):
         if n < 1:
             raise ValueError(f"n must be at least 1, got {n}")
+        if cfg.dynamics.winch != "fixed":
+            raise ValueError("the fast fidelity flies the paper's constant tether: dynamics.winch must be 'fixed', "
+                             f"got {cfg.dynamics.winch!r}")
         self.cfg, self.n, self.dt = cfg, int(n), cfg.dynamics.dt_s
         self.q_design = np.ascontiguousarray(q_design, dtype=float)
         self.tip_lengths = np.asarray(tip_lengths, dtype=float)
         dyn = cfg.dynamics
         ps = ParticleSystem(dyn, self.tip_lengths, np.zeros(4), cfg.aero.rho_kg_m3)
         # particle parameters shared by all kites (kernel_parameters without rest and pair damping)
-        (self.m, _, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d, self.l_t, _, _,
+        (self.m, _, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d, self.l_t, _, _, _,
          self.g, self.baumgarte, _, _) = ps.kernel_parameters()
         # the MLP with its normalisations folded into the first and last layers
         W, b = [w.astype(float) for w in surrogate.weights], [c.astype(float) for c in surrogate.biases]
@@ -706,7 +709,7 @@ class SurrogateFlightSimulator(FlightSimulator):
         fe.L_B0, fe.L_D0 = self.L_B0, self.L_D0
         fe.particles.set_steering(float(self.kites.rest[0, 1]), float(self.kites.rest[0, 3]))
         fe.state = ParticleState(self.kites.r[0].copy(), self.kites.v[0].copy())
-        fe.t = float(self.kites.t[0])
+        fe.t = fe._t_step = float(self.kites.t[0])
         self.wing.reset()
         self._fe_rec = fe._solve_wing(first=True)
         self._fe = fe

@@ -46,15 +46,15 @@ _A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
 
 @njit(**_JIT)
 def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho, line_cd,
-                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha,
-                           minv_K, wing_inertia):
+                           line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths, pair_damping,
+                           gravity, alpha, minv_K, wing_inertia):
     """Constrained accelerations of A, B, C, D, KCU and the constraint multipliers (``FlightSimulator._rhs``):
     :func:`particle_accelerations_into` with new arrays. Returns ``(a, lam)``."""
     a = np.empty((5, 3))
     lam = np.empty(3)
     particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
-                                line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
-                                gravity, alpha, minv_K, wing_inertia, a, lam, np.empty(_WORK))
+                                line_cd, line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths,
+                                pair_damping, gravity, alpha, minv_K, wing_inertia, a, lam, np.empty(_WORK))
     return a, lam
 
 
@@ -65,8 +65,8 @@ _WORK = 157
 
 @njit(**_JIT)
 def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
-                                line_cd, line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping,
-                                gravity, alpha, minv_K, wing_inertia, a, lam, work):
+                                line_cd, line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths,
+                                pair_damping, gravity, alpha, minv_K, wing_inertia, a, lam, work):
     """Constrained accelerations of A, B, C, D, KCU into ``a`` (5, 3) and the constraint multipliers into ``lam``
     (3,), with the intermediate arrays in ``work`` (:data:`_WORK`,) (no allocation: the fast fidelity calls this
     16 times per kite and environment step).
@@ -97,6 +97,9 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
     rho, line_cd, line_diameter, tether_diameter : float [kg/m^3], [-], [m], [m]
         Line drag (Eq. 11); the tether drag is applied only with ``tether_diameter > 0``.
     tether_length : float [m]
+        ``l_t`` at the time of the call.
+    reel_speed : float [m/s]
+        ``dl_t/dt`` (winch reel-out; 0 for the paper's constant tether), constant over the step.
     tip_lengths : (2,) float [m]
         Constrained distances A-B and C-D.
     pair_damping : (4,) float [N s/m]
@@ -276,9 +279,11 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         _wing_inertia_free(f, R, minv_K, gravity, a, work[85:97], work[97:109])
     # tether: G = [0 ... r_KCU]
     rk0, rk1, rk2 = r[_KCU, 0], r[_KCU, 1], r[_KCU, 2]
+    # reeling tether l_t(t) with constant dl_t/dt over the step: g = 1/2 (|r|^2 - l_t^2), dg/dt = G v - l_t l_t',
+    # d2g/dt2 = G a + |v|^2 - l_t'^2
     g = 0.5 * ((rk0 * rk0 + rk1 * rk1 + rk2 * rk2) - tether_length * tether_length)
-    gdot_v = v[_KCU, 0] * v[_KCU, 0] + v[_KCU, 1] * v[_KCU, 1] + v[_KCU, 2] * v[_KCU, 2]
-    Gv = rk0 * v[_KCU, 0] + rk1 * v[_KCU, 1] + rk2 * v[_KCU, 2]
+    gdot_v = v[_KCU, 0] * v[_KCU, 0] + v[_KCU, 1] * v[_KCU, 1] + v[_KCU, 2] * v[_KCU, 2] - reel_speed * reel_speed
+    Gv = rk0 * v[_KCU, 0] + rk1 * v[_KCU, 1] + rk2 * v[_KCU, 2] - tether_length * reel_speed
     Ga = rk0 * a[_KCU, 0] + rk1 * a[_KCU, 1] + rk2 * a[_KCU, 2]
     S = rk0 * minv[_KCU] * rk0 + rk1 * minv[_KCU] * rk1 + rk2 * minv[_KCU] * rk2
     lam[0] = (-gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga) / S
@@ -437,13 +442,14 @@ def _pair_update(x, i, j, wi, wj, s, d0, d1, d2):
 
 
 @njit(**_JIT)
-def project_constraints(r, v, m, tether_length, tip_lengths, iters):
+def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
     """Mass-weighted projection of positions (``iters`` passes), then velocities, onto the tether and tip-beam
     distance constraints: :meth:`kite_env.dynamics.particles.ParticleSystem.project` in scalar loops.
 
     The three constraints ``g = 1/2 (|d|^2 - L^2)`` (tether at the KCU, A-B, C-D) involve disjoint masses, so
     ``G M^-1 G^T`` is diagonal and each constraint is projected on its own: ``r -= M^-1 G^T g / (G M^-1 G^T)``,
-    then ``v -= M^-1 G^T (G v) / (G M^-1 G^T)``. Returns new arrays ``r, v`` (5, 3).
+    then ``v -= M^-1 G^T (G v) / (G M^-1 G^T)`` (the tether's radial KCU speed set to ``reel_speed`` [m/s], the
+    winch's dl_t/dt). Returns new arrays ``r, v`` (5, 3).
     """
     r = r.copy()
     v = v.copy()
@@ -461,6 +467,7 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters):
         i, j = pairs_i[c], pairs_j[c]
         wi, wj, d0, d1, d2 = _pair_difference(r, m, i, j)
         _, _, u0, u1, u2 = _pair_difference(v, m, i, j)
-        _pair_update(v, i, j, wi, wj, (d0 * u0 + d1 * u1 + d2 * u2) / ((d0 * d0 + d1 * d1 + d2 * d2) * (wi + wj)),
-                     d0, d1, d2)
+        target = lengths[0] * reel_speed if c == 0 else 0.0  # G v of the reeling tether: l_t dl_t/dt
+        _pair_update(v, i, j, wi, wj, (d0 * u0 + d1 * u1 + d2 * u2 - target)
+                     / ((d0 * d0 + d1 * d1 + d2 * d2) * (wi + wj)), d0, d1, d2)
     return r, v

@@ -85,6 +85,10 @@ class ParticleSystem:
         # the wing's mass matrix on A-D in frame K (set_wing_mass); None: the point masses m_A ... m_D
         self.wing_mass_K: np.ndarray | None = None
         self.wing_minv_K = np.zeros((12, 12))
+        # tether length l_t and its rate (the winch, FlightSimulator): the constraint |r_KCU| = l_t at the time of
+        # the call; the paper's constant tether: l_t = tether_length_m, rate 0
+        self.tether_length = float(cfg.tether_length_m)
+        self.reel_speed = 0.0
 
     def set_wing_mass(self, M_K: np.ndarray | None) -> None:
         """Carry the wing's mass on A-D as the (12, 12) symmetric positive definite matrix ``M_K`` [kg] in frame K
@@ -110,12 +114,12 @@ class ParticleSystem:
     def kernel_parameters(self) -> tuple:
         """Parameters of the compiled right-hand side :func:`kite_env.dynamics.kernels.particle_accelerations`, in
         its argument order after ``K_b``: ``m (5,), rest (4,), k_c, c_c, rho, line_cd, line_diameter,
-        tether_diameter, tether_length, tip_lengths (2,), pair_damping (4,), gravity, alpha, minv_K (12, 12),
-        wing_inertia`` (SI units)."""
+        tether_diameter, tether_length, reel_speed, tip_lengths (2,), pair_damping (4,), gravity, alpha,
+        minv_K (12, 12), wing_inertia`` (SI units; the tether length and its rate as now set)."""
         cfg = self.cfg
         return (self.m, self.rest, float(cfg.line_stiffness_N_per_m), float(cfg.line_damping_Ns_per_m), self.rho,
                 float(cfg.line_cd), float(cfg.line_diameter_m), float(cfg.tether_diameter_m),
-                float(cfg.tether_length_m), self.tip_lengths, self.pair_damping, float(cfg.gravity_mps2),
+                self.tether_length, self.reel_speed, self.tip_lengths, self.pair_damping, float(cfg.gravity_mps2),
                 float(cfg.baumgarte_1_per_s), self.wing_minv_K, self.wing_mass_K is not None)
 
     # ------------------------------------------------------------------ forces
@@ -174,9 +178,9 @@ class ParticleSystem:
         G = np.zeros((3, 15))
         gdot_v = np.empty(3)
         rk = r[KCU]
-        g[0] = 0.5 * (rk @ rk - self.cfg.tether_length_m**2)
+        g[0] = 0.5 * (rk @ rk - self.tether_length**2)
         G[0, 3 * KCU:3 * KCU + 3] = rk
-        gdot_v[0] = v[KCU] @ v[KCU]
+        gdot_v[0] = v[KCU] @ v[KCU] - self.reel_speed**2  # reeling tether: d2g/dt2 = G a + |v|^2 - l_t'^2
         for c, (i, j), L in ((1, (A, B), self.tip_lengths[0]), (2, (C, D), self.tip_lengths[1])):
             d = r[i] - r[j]
             dv = v[i] - v[j]
@@ -201,7 +205,9 @@ class ParticleSystem:
             Minv[:12, :12] = Rb @ self.wing_minv_K @ Rb.T
             a_free = Minv @ f.ravel()
             a_free[2:12:3] -= self.cfg.gravity_mps2
-        rhs = -gdot_v - 2.0 * al * (G @ v.ravel()) - al * al * g - G @ a_free
+        Gv = G @ v.ravel()
+        Gv[0] -= self.tether_length * self.reel_speed  # dg/dt of the reeling tether
+        rhs = -gdot_v - 2.0 * al * Gv - al * al * g - G @ a_free
         S = G @ Minv @ G.T
         lam = np.linalg.solve(S, rhs)
         a = a_free + Minv @ (G.T @ lam)
@@ -217,11 +223,13 @@ class ParticleSystem:
             r = (r.ravel() - minv * (G.T @ np.linalg.solve(S, g))).reshape(5, 3)
         _, G, _ = self._constraints(r, v)
         S = (G * minv) @ G.T
-        v = (v.ravel() - minv * (G.T @ np.linalg.solve(S, G @ v.ravel()))).reshape(5, 3)
+        Gv = G @ v.ravel()
+        Gv[0] -= self.tether_length * self.reel_speed  # radial KCU speed = reel speed
+        v = (v.ravel() - minv * (G.T @ np.linalg.solve(S, Gv))).reshape(5, 3)
         return r, v
 
     def constraint_violation(self, r: np.ndarray) -> np.ndarray:
         """Length errors [m] of the tether, A-B and C-D constraints."""
-        return np.array([np.linalg.norm(r[KCU]) - self.cfg.tether_length_m,
+        return np.array([np.linalg.norm(r[KCU]) - self.tether_length,
                          np.linalg.norm(r[A] - r[B]) - self.tip_lengths[0],
                          np.linalg.norm(r[C] - r[D]) - self.tip_lengths[1]])

@@ -56,6 +56,9 @@ class StepRecord:
     line_length: np.ndarray  # (4,) [m]
     tether_force: float  # [N], constraint force of the tether
     constraint_drift: np.ndarray  # (3,) [m] before the projection
+    substeps: int = 1  # steps the time step was made in (FlightSimulator.step: halved where the wing failed)
+    tether_length: float = float("nan")  # l_t at the end of the step [m]
+    reel_speed: float = 0.0  # winch reel-out speed of the next step [m/s]
 
 
 def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
@@ -108,6 +111,9 @@ class FlightSimulator:
         self.L_B0 = self.L_D0 = None
         self._F_k_K = None  # wing force on A-D held over the step, frame K
         self._F_end_K = None  # predictor-corrector: wing force at the end of the step
+        self.tether_length = cfg.dynamics.tether_length_m  # l_t [m] (the winch: dynamics.winch)
+        self.reel_speed = 0.0  # dl_t/dt [m/s], held over a step
+        self._t_step = 0.0  # start of the step being made (tether length within it)
 
     # ------------------------------------------------------------------ set-up
     def _flight_state(self, t: float, st: ParticleState):
@@ -167,11 +173,13 @@ class FlightSimulator:
         self.L_D0 = self.L_B0
         self.pair_stiffness = k_pairs
         self.particles = ParticleSystem(cfg.dynamics, self.tip_lengths, k_pairs, cfg.aero.rho_kg_m3)
+        self.tether_length, self.reel_speed, self._t_step = cfg.dynamics.tether_length_m, 0.0, t0
         self.particles.set_steering(self.L_B0, self.L_D0)
         r, v = self._project(r, v)
         self.state = ParticleState(r, v)
         self.t = t0
         rec = self._solve_wing(first=True)
+        rec.tether_length = self.tether_length
         f = cfg.dynamics.wing_point_mass_share
         if f < 1.0:  # the wing's mass: a share at the four points, the rest distributed and condensed (wing_mass.py)
             M = condensed_wing_mass(wing, nodal_wing_mass(wing.mesh, cfg.dynamics), shape=rec.wing.nodes)
@@ -193,14 +201,15 @@ class FlightSimulator:
 
     # ------------------------------------------------------------------ stepping
     def _solve_wing(self, first: bool = False, commit: bool = True, state: ParticleState | None = None,
-                    t: float | None = None) -> StepRecord:
+                    t: float | None = None, dt: float | None = None) -> StepRecord:
         """Wing at the particle ``state`` and time ``t`` (default: the current ones). With ``commit`` the solution
         is the wing's new warm start and Eq. 3 reference, and its force is held over the next step."""
         st = self.state if state is None else state
         t = self.t if t is None else t
         origin, R, v_k, omega, v_w, X, q_b = self._flight_state(t, st)
         try:
-            sol = self.wing.solve(q_b, X, dt=None if first else self.dt, support="prescribed", warm=True,
+            sol = self.wing.solve(q_b, X, dt=None if first else (self.dt if dt is None else dt), support="prescribed",
+                                  warm=True,
                                   commit=commit)
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
@@ -215,6 +224,7 @@ class FlightSimulator:
     def _rhs(self, t: float, r: np.ndarray, v: np.ndarray, frac: float = 0.0):
         """Velocities ``v``, constrained accelerations ``a`` (5, 3) and multipliers ``lam`` (3,) at ``t``, with the wing
         force of the step (``frac``: fraction of the step, used by the predictor-corrector interpolation)."""
+        self._set_tether(t)
         if self.backend == "numba":
             interpolate = self._F_end_K is not None
             wind = np.asarray(self.wind.velocity(t, r), dtype=float)
@@ -237,15 +247,22 @@ class FlightSimulator:
         a, lam = self.particles.accelerations(r, v, f)
         return v, a, lam
 
+    def _set_tether(self, t: float) -> None:
+        """The particle system's tether length at ``t`` within the step: ``l_t + (t - t_step) dl_t/dt``."""
+        p = self.particles
+        p.tether_length = self.tether_length + (t - self._t_step) * self.reel_speed
+        p.reel_speed = self.reel_speed
+
     def _project(self, r: np.ndarray, v: np.ndarray):
-        """Positions and velocities projected onto the distance constraints (compiled or NumPy reference)."""
+        """Positions and velocities projected onto the distance constraints (compiled or NumPy reference), with the
+        tether length as last set (:meth:`_set_tether`)."""
         if self.backend == "numba":
             p = self.particles
-            return project_constraints(r, v, p.m, float(p.cfg.tether_length_m), p.tip_lengths, 3)
+            return project_constraints(r, v, p.m, p.tether_length, p.tip_lengths, 3, p.reel_speed)
         return self.particles.project(r, v)
 
-    def _rk4(self, t, r0, v0):
-        dt = self.dt
+    def _rk4(self, t, r0, v0, dt: float | None = None):
+        dt = self.dt if dt is None else dt
         k1v, k1a, lam = self._rhs(t, r0, v0, 0.0)
         k2v, k2a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a, 0.5)
         k3v, k3a, _ = self._rhs(t + 0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a, 0.5)
@@ -254,34 +271,77 @@ class FlightSimulator:
         v = v0 + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
             raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
+        self._set_tether(t + dt)
         drift = self.particles.constraint_violation(r)
         r, v = self._project(r, v)
         return r, v, lam, drift
 
     def step(self, L_B: float, L_D: float) -> StepRecord:
-        """Advance by ``dt`` with the steering-line rest lengths ``L_B`` (right), ``L_D`` (left) [m]."""
+        """Advance by ``dt`` with the steering-line rest lengths ``L_B`` (right), ``L_D`` (left) [m].
+
+        A step whose wing solve does not converge is repeated as two half steps, each of them halved again where it
+        fails, down to ``dt / 2**dynamics.max_substep_halvings`` (a quasi-static wing passing through a luffing
+        event follows its aerodynamically damped motion, whose backward-Euler step matrix ``K_T - J + C/dt`` is
+        positive definite again for a small enough step; docs/flight_model.md, section 10). The record's
+        ``substeps`` says how many steps were made (1: none split). Only a sub-step of the smallest size that still
+        fails raises :class:`SimulationError`, with the residual history of the last attempt.
+        """
         if self.state is None:
             raise RuntimeError("call reset() before step()")
         self.particles.set_steering(L_B, L_D)
-        dt, t = self.dt, self.t
+        rec, n = self._step_split(self.dt, self.cfg.dynamics.max_substep_halvings)
+        rec.substeps = n
+        return rec
+
+    def _step_split(self, dt: float, halvings: int) -> tuple[StepRecord, int]:
+        try:
+            return self._step(dt), 1
+        except SimulationError as exc:
+            if exc.reason != "wing did not converge" or halvings <= 0:
+                raise
+        rec1, n1 = self._step_split(0.5 * dt, halvings - 1)
+        rec2, n2 = self._step_split(0.5 * dt, halvings - 1)
+        rec2.wing.newton_iters += rec1.wing.newton_iters
+        return rec2, n1 + n2
+
+    def _step(self, dt: float) -> StepRecord:
+        """One step of ``dt`` (explicit particle step, then the wing at its end); on a wing failure the simulator
+        is left as it was before the step."""
+        t = self.t
         r0, v0 = self.state.r, self.state.v
         self._F_end_K = None
-        r, v, lam, drift = self._rk4(t, r0, v0)
+        self._t_step = t
+        r, v, lam, drift = self._rk4(t, r0, v0, dt)
         if self.cfg.dynamics.coupling == "predictor_corrector":
             # predictor: wing at the end of the explicit step (not committed); corrector: the step again with the
             # wing force interpolated between both ends (a trapezoidal coupling of the wing force)
-            pred = self._solve_wing(commit=False, state=ParticleState(r, v), t=t + dt)
+            pred = self._solve_wing(commit=False, state=ParticleState(r, v), t=t + dt, dt=dt)
             self._F_end_K = -pred.wing.F_b
-            r, v, lam, drift = self._rk4(t, r0, v0)
+            r, v, lam, drift = self._rk4(t, r0, v0, dt)
             self._F_end_K = None
-        self.state = ParticleState(r, v)
+        rec = self._solve_wing(state=ParticleState(r, v), t=t + dt, dt=dt)
+        self.state = rec.state
         self.t = t + dt
-        rec = self._solve_wing()
         rec.constraint_drift = drift
         # tether tension at the start of the step: the constraint force G^T lambda = lambda r_KCU pulls the KCU
         # towards the ground station (lambda < 0)
-        rec.tether_force = float(-lam[0] * self.cfg.dynamics.tether_length_m)
+        rec.tether_force = float(-lam[0] * self.tether_length)
+        self.tether_length += dt * self.reel_speed
+        self._t_step = self.t
+        self._winch(rec.tether_force, dt)
+        rec.tether_length, rec.reel_speed = self.tether_length, self.reel_speed
         return rec
+
+    def _winch(self, F_t: float, dt: float) -> None:
+        """Reel-out speed of the next step (``dynamics.winch``): "fixed" keeps the paper's constant tether; "force"
+        lets the speed follow ``clip((F_t - F_set) / c_w, 0, v_max)`` with the time constant ``tau`` (exact
+        first-order lag over ``dt``): a winch in force control during the traction phase (reel-in, the other phase
+        of a pumping cycle, is not modelled)."""
+        d = self.cfg.dynamics
+        if d.winch == "fixed":
+            return
+        v_set = min(max((F_t - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
+        self.reel_speed = v_set + (self.reel_speed - v_set) * float(np.exp(-dt / d.winch_time_constant_s))
 
 
 def _frame(r: np.ndarray):

@@ -244,6 +244,7 @@ class KiteFigureEightEnv(gym.Env):
         self.s_hint = s0
         self.last_action = 0.0
         self.steps = 0
+        self.substepped_steps = 0  # physics steps split because the wing failed at the full step (sim.step)
         self.episode_info = {"wind_speed_mps": wind_speed, "turbulence_intensity": ti, "wind_seed": wind_seed,
                              "start_s": s0, "initial_speed_mps": v0}
         self._trail = [self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4])]
@@ -284,7 +285,8 @@ class KiteFigureEightEnv(gym.Env):
             if self.recorder is not None:
                 self.recorder.record(rec, self.L_B, self.L_D, ainfo, time.perf_counter() - t0)
             r_kcu = rec.state.r[4]
-            if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * cfg.dynamics.tether_length_m:
+            self.substepped_steps += rec.substeps > 1
+            if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(float(r_kcu @ r_kcu)):
                 reason = "ground"
                 break
             if rec.tether_force < cfg.env.slack_tether_N:
@@ -303,7 +305,7 @@ class KiteFigureEightEnv(gym.Env):
         obs = np.clip(obs, self.observation_space.low, self.observation_space.high)
         info = {**terms, **feats, "delta_l_star_m": ainfo["delta_l_star"], "L_B_m": self.L_B, "L_D_m": self.L_D,
                 "termination_reason": reason if terminated else ("time limit" if truncated else None),
-                "fidelity": self.sim.fidelity_now}
+                "fidelity": self.sim.fidelity_now, "substepped_steps": self.substepped_steps}
         if detail:
             info["termination_detail"] = detail
         self._trail.append(self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4]))

@@ -194,7 +194,7 @@ def _wrap(x):
 
 @njit(**_JIT)
 def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action,
-                  samples, s_samples, window, ds, a, b, rot, tether_length, force_scale, dl_max, tracking_scale,
+                  samples, s_samples, window, ds, a, b, rot, force_scale, dl_max, tracking_scale,
                   parts, feats):
     """Observation terms and features of every ``active`` kite (:meth:`KiteFigureEightEnv._observe` for n kites).
 
@@ -212,7 +212,7 @@ def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, te
     last_action : (n,) float, the actuator term's last action
     samples, s_samples, window, ds, a, b, rot : the path (:class:`Lemniscate` samples, window half width in
         samples, sample spacing, chart parameters, rotation)
-    tether_length, force_scale, dl_max, tracking_scale : [m], [N], [m], [rad]
+    force_scale, dl_max, tracking_scale : [N], [m], [rad]
     parts : (n, 22) float, out: terms of :data:`TERMS`; feats : (n, 13) float, out: :data:`FEATURES`
     """
     m = np.empty((3, 3))
@@ -232,9 +232,9 @@ def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, te
         dpsi = _wrap(psi_t - psi)
         xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(R0, R1, R2)  # with its own re-normalisation, as sphere_basis
         vr = v_kcu[k, 0] * R0 + v_kcu[k, 1] * R1 + v_kcu[k, 2] * R2
-        w0 = (v_kcu[k, 0] - vr * R0) / tether_length
-        w1 = (v_kcu[k, 1] - vr * R1) / tether_length
-        w2 = (v_kcu[k, 2] - vr * R2) / tether_length
+        w0 = (v_kcu[k, 0] - vr * R0) / n_r  # angular rate on the unit sphere (n_r = l_t, also while reeling)
+        w1 = (v_kcu[k, 1] - vr * R1) / n_r
+        w2 = (v_kcu[k, 2] - vr * R2) / n_r
         yaw = R_wk[k, 0, 2] * omega[k, 0] + R_wk[k, 1, 2] * omega[k, 1] + R_wk[k, 2, 2] * omega[k, 2]
         speed = math.sqrt(v_kite[k, 0] ** 2 + v_kite[k, 1] ** 2 + v_kite[k, 2] ** 2)
         T0, T1, T2, T3 = tension[k, 0], tension[k, 1], tension[k, 2], tension[k, 3]
@@ -277,7 +277,7 @@ class Observer:
         self.s_samples = np.ascontiguousarray(path.s_samples, dtype=float)
         self.window = int(_HINT_WINDOW / path._ds)
         self._consts = (self.samples, self.s_samples, self.window, float(path._ds), float(path.a), float(path.b),
-                        np.ascontiguousarray(path._rot, dtype=float), float(cfg.dynamics.tether_length_m),
+                        np.ascontiguousarray(path._rot, dtype=float),
                         float(cfg.env.force_scale_N), float(cfg.control.delta_l_max_m),
                         math.radians(cfg.env.tracking_scale_deg))
 

@@ -269,6 +269,8 @@ class KiteFigureEightVectorEnv(VectorEnv):
             fid = np.full(self.num_envs, None, dtype=object)
             fid[run] = "surrogate"
             put("fidelity", fid, run.copy())
+            # the surrogate wing has no failing solve to split (FlightSimulator.step); the key as in the single env
+            put("substepped_steps", np.zeros(self.num_envs, dtype=np.int64), run.copy())
             if details:
                 det = np.full(self.num_envs, None, dtype=object)
                 mask = np.zeros(self.num_envs, dtype=np.bool_)

@@ -126,3 +126,87 @@ def test_predictor_corrector_coupling_agrees_with_the_explicit_one():
     assert err["explicit", 0.005] < 5e-3 and err["predictor_corrector", 0.005] < 5e-3
     assert err["explicit", 0.0025] < 0.6 * err["explicit", 0.005]  # converges with the step
     assert abs(a.tether_force - b.tether_force) < 0.02 * a.tether_force
+
+
+def test_the_paper_tether_keeps_its_length(flight):
+    """dynamics.winch = "fixed" (default): the constant tether of the paper's model, no reel-out."""
+    _, _, recs = flight
+    assert all(r.tether_length == 80.0 and r.reel_speed == 0.0 for r in recs)
+    assert all(r.substeps == 1 for r in recs)
+
+
+def test_winch_in_force_control_reels_out_and_keeps_the_kcu_on_the_tether(flight):
+    """dynamics.winch = "force": above the set force the reel-out speed follows (F_t - F_set) / c_w with its lag;
+    the tether length grows by the reel-out of each step, the KCU stays on the tether and moves away from the
+    ground station at the reel speed, and reeling out lowers the traction against the same flight on the constant
+    tether (the kite's apparent wind falls by the reel speed)."""
+    _, _, fixed = flight
+    cfg = Config()
+    cfg = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, winch="force", winch_force_N=1000.0,
+                                                                winch_time_constant_s=0.05))
+    sim = FlightSimulator(cfg, UniformWind())
+    start(sim)
+    d = cfg.dynamics
+    l_t, v_r = 80.0, 0.0
+    recs = []
+    for _ in range(60):
+        rec = sim.step(sim.L_B0, sim.L_D0)
+        l_t += d.dt_s * v_r  # the step reels out at the speed set after the previous one
+        v_set = min(max((rec.tether_force - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
+        v_r = v_set + (v_r - v_set) * np.exp(-d.dt_s / d.winch_time_constant_s)
+        assert rec.tether_length == pytest.approx(l_t, abs=1e-12) and rec.reel_speed == pytest.approx(v_r, abs=1e-12)
+        r, v = rec.state.r[4], rec.state.v[4]
+        assert np.linalg.norm(r) == pytest.approx(l_t, abs=1e-9)
+        recs.append(rec)
+    assert recs[-1].tether_length > 80.2 and 1.0 < recs[-1].reel_speed < 6.0
+    r, v = recs[-1].state.r[4], recs[-1].state.v[4]
+    assert r @ v / np.linalg.norm(r) == pytest.approx(recs[-2].reel_speed, rel=1e-6)
+    assert recs[-1].tether_force < 0.9 * fixed[-1].tether_force
+
+
+def test_a_step_whose_wing_fails_is_made_in_halves(monkeypatch):
+    """FlightSimulator.step: a wing solve that fails at the full step is retried as two half steps (the flight
+    goes on, the record says 2 sub-steps) and gives the flight of the half step to within the wing's solver
+    tolerance; with no halvings allowed, or where every size fails, the step raises with the wing's message."""
+    from kite_env.dynamics.simulator import SimulationError
+    from kite_env.fsi import WingConvergenceError
+
+    def failing(sim, sizes):
+        """Make the wing fail at the step sizes in ``sizes``."""
+        solve = sim.wing.solve
+
+        def patched(q_b, flight, dt=None, **kw):
+            if dt is not None and any(abs(dt - s) < 1e-12 for s in sizes):
+                raise WingConvergenceError("test: forced failure", [])
+            return solve(q_b, flight, dt=dt, **kw)
+
+        monkeypatch.setattr(sim.wing, "solve", patched)
+
+    cfg = Config()
+    sim = FlightSimulator(cfg, UniformWind())
+    start(sim)
+    for _ in range(4):
+        sim.step(sim.L_B0, sim.L_D0)
+    half = FlightSimulator(dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, dt_s=0.0025)),
+                           UniformWind())
+    start(half)
+    for _ in range(8):
+        half.step(half.L_B0, half.L_D0)
+    failing(sim, [0.005])
+    rec = sim.step(sim.L_B0, sim.L_D0)
+    for _ in range(2):
+        ref = half.step(half.L_B0, half.L_D0)
+    assert rec.substeps == 2 and sim.t == pytest.approx(0.025)
+    np.testing.assert_allclose(rec.state.r, ref.state.r, atol=2e-4)
+    # every size down to dt / 16 fails: 1 + 2 + ... attempts are made, then the wing's error is raised
+    failing(sim, [0.005 / 2**k for k in range(5)])
+    with pytest.raises(SimulationError, match="wing did not converge: test: forced failure"):
+        sim.step(sim.L_B0, sim.L_D0)
+    assert sim.t == pytest.approx(0.025)  # the simulator is left at the start of the failed step
+    no_split = FlightSimulator(dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics,
+                                                                                     max_substep_halvings=0)),
+                               UniformWind())
+    start(no_split)
+    failing(no_split, [0.005])
+    with pytest.raises(SimulationError):
+        no_split.step(no_split.L_B0, no_split.L_D0)

@@ -178,7 +178,7 @@ def test_compiled_constraint_projection_matches_numpy_reference(seed):
     v = 20.0 * rng.normal(size=(5, 3))
     r_in, v_in = r.copy(), v.copy()
     r_ref, v_ref = p.project(r, v)
-    r_nb, v_nb = project_constraints(r, v, p.m, float(p.cfg.tether_length_m), p.tip_lengths, 3)
+    r_nb, v_nb = project_constraints(r, v, p.m, float(p.cfg.tether_length_m), p.tip_lengths, 3, 0.0)
     np.testing.assert_allclose(r_nb, r_ref, rtol=1e-14, atol=1e-12)
     np.testing.assert_allclose(v_nb, v_ref, rtol=1e-13, atol=1e-10)
     assert np.max(np.abs(p.constraint_violation(r_nb))) < 1e-9
@@ -187,3 +187,49 @@ def test_compiled_constraint_projection_matches_numpy_reference(seed):
     np.testing.assert_allclose(g_dot, 0.0, atol=1e-9)
     np.testing.assert_array_equal(r, r_in)  # the inputs are not modified
     np.testing.assert_array_equal(v, v_in)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_reeling_tether_kernel_matches_numpy_and_its_constraint(seed):
+    """With the winch reeling out (l_t(t) = l_0 + v_r (t - t_0)) the compiled and NumPy right-hand sides agree, and
+    the accelerations satisfy the reeling tether's constraint equation: g = 1/2 (|r|^2 - l_t^2),
+    G a = -(|v|^2 - v_r^2) - 2 alpha (r . v - l_t v_r) - alpha^2 g."""
+    ref, nb = simulator("numpy"), simulator("numba")
+    t = 0.8
+    for sim in (ref, nb):
+        r, v, _ = flight_state(seed, sim, slack=seed)
+        sim.tether_length, sim.reel_speed, sim._t_step = 80.2, 3.0, t - 0.002
+    _, a_ref, lam_ref = ref._rhs(t, r, v)
+    _, a_nb, lam_nb = nb._rhs(t, r, v)
+    assert_same(a_nb, a_ref)
+    assert_same(lam_nb, lam_ref)
+    l_t, v_r = 80.2 + 0.002 * 3.0, 3.0
+    assert nb.particles.tether_length == pytest.approx(l_t, abs=1e-12)
+    al = nb.cfg.dynamics.baumgarte_1_per_s
+    rk, vk = r[KCU], v[KCU]
+    g = 0.5 * (rk @ rk - l_t**2)
+    np.testing.assert_allclose(rk @ a_nb[KCU], -(vk @ vk - v_r**2) - 2 * al * (rk @ vk - l_t * v_r) - al * al * g,
+                               rtol=1e-10)
+    # the reel speed changes the tether force: the same state with the constant tether gives another multiplier
+    nb.reel_speed = 0.0
+    _, _, lam_fixed = nb._rhs(t, r, v)
+    assert abs(lam_fixed[0] - lam_nb[0]) > 1e-3 * abs(lam_nb[0])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_projection_onto_a_reeling_tether(seed):
+    """Both projections put the KCU at |r_KCU| = l_t with the radial speed r . v / l_t = v_r (the winch)."""
+    from kite_env.dynamics.kernels import project_constraints
+
+    sim = simulator("numpy")
+    p = sim.particles
+    p.tether_length, p.reel_speed = 83.0, 2.5
+    rng = np.random.default_rng(seed)
+    r = np.vstack([Q0 + [0.0, 0.0, 108.0], [0.0, 0.0, 83.0]]) + 0.02 * rng.normal(size=(5, 3))
+    v = 20.0 * rng.normal(size=(5, 3))
+    r_ref, v_ref = p.project(r, v)
+    r_nb, v_nb = project_constraints(r, v, p.m, p.tether_length, p.tip_lengths, 3, p.reel_speed)
+    np.testing.assert_allclose(r_nb, r_ref, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(v_nb, v_ref, rtol=1e-13, atol=1e-10)
+    assert np.linalg.norm(r_nb[KCU]) == pytest.approx(83.0, abs=1e-9)
+    assert r_nb[KCU] @ v_nb[KCU] / 83.0 == pytest.approx(2.5, abs=1e-9)
