@@ -231,7 +231,8 @@ _POSITIVE = {
     "dynamics.mass_le_kg", "dynamics.mass_te_kg", "dynamics.mass_kcu_kg", "dynamics.line_diameter_m",
     "dynamics.line_stiffness_N_per_m", "dynamics.power_line_length_m", "dynamics.tether_length_m", "dynamics.dt_s",
     "dynamics.baumgarte_1_per_s", "dynamics.winch_force_N", "dynamics.winch_damping_Ns_per_m",
-    "dynamics.winch_speed_max_mps", "dynamics.winch_time_constant_s", "control.k2", "control.delta_l_max_m", "control.beta_distance_deg",
+    "dynamics.winch_speed_max_mps", "dynamics.winch_time_constant_s", "control.k2", "control.delta_l_max_m",
+    "control.beta_distance_deg",
     "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps", "env.max_episode_s", "env.force_scale_N",
     "env.tracking_scale_deg", "env.traction_ref_N", "env.initial_speed_min_mps", "env.initial_speed_max_mps",
     "env.reset_attempts", "env.start_curvature_max",
@@ -240,7 +241,8 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag", "dynamics.line_cd",
+    "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
+    "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",

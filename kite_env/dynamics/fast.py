@@ -709,7 +709,7 @@ class SurrogateFlightSimulator(FlightSimulator):
         fe.L_B0, fe.L_D0 = self.L_B0, self.L_D0
         fe.particles.set_steering(float(self.kites.rest[0, 1]), float(self.kites.rest[0, 3]))
         fe.state = ParticleState(self.kites.r[0].copy(), self.kites.v[0].copy())
-        fe.t = fe._t_step = float(self.kites.t[0])
+        fe.t = float(self.kites.t[0])
         self.wing.reset()
         self._fe_rec = fe._solve_wing(first=True)
         self._fe = fe

@@ -18,6 +18,7 @@ reproducible bit for bit and the wing's warm start sees equal steps.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,9 +209,8 @@ class FlightSimulator:
         t = self.t if t is None else t
         origin, R, v_k, omega, v_w, X, q_b = self._flight_state(t, st)
         try:
-            sol = self.wing.solve(q_b, X, dt=None if first else (self.dt if dt is None else dt), support="prescribed",
-                                  warm=True,
-                                  commit=commit)
+            step = None if first else (self.dt if dt is None else dt)
+            sol = self.wing.solve(q_b, X, dt=step, support="prescribed", warm=True, commit=commit)
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
         if commit:
@@ -284,7 +284,7 @@ class FlightSimulator:
         event follows its aerodynamically damped motion, whose backward-Euler step matrix ``K_T - J + C/dt`` is
         positive definite again for a small enough step; docs/flight_model.md, section 10). The record's
         ``substeps`` says how many steps were made (1: none split). Only a sub-step of the smallest size that still
-        fails raises :class:`SimulationError`, with the residual history of the last attempt.
+        fails raises :class:`SimulationError`, with the wing's message.
         """
         if self.state is None:
             raise RuntimeError("call reset() before step()")
@@ -327,7 +327,6 @@ class FlightSimulator:
         # towards the ground station (lambda < 0)
         rec.tether_force = float(-lam[0] * self.tether_length)
         self.tether_length += dt * self.reel_speed
-        self._t_step = self.t
         self._winch(rec.tether_force, dt)
         rec.tether_length, rec.reel_speed = self.tether_length, self.reel_speed
         return rec
@@ -341,7 +340,7 @@ class FlightSimulator:
         if d.winch == "fixed":
             return
         v_set = min(max((F_t - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
-        self.reel_speed = v_set + (self.reel_speed - v_set) * float(np.exp(-dt / d.winch_time_constant_s))
+        self.reel_speed = v_set + (self.reel_speed - v_set) * math.exp(-dt / d.winch_time_constant_s)
 
 
 def _frame(r: np.ndarray):
