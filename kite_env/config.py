@@ -49,6 +49,14 @@ class StructureConfig:
     # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
     te_wire_E_Pa: float = 5.5e8  # [Pa]
     te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
+    # the wing with inertia (dynamics/wing_dynamics.py): nodal masses (Table 1's 10 kg, 70 % on the LE tube) and
+    # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines; false = the
+    # paper's quasi-static wing on the particles A-D
+    dynamic: bool = False
+    rho_inf: float = 0.8  # generalized-alpha spectral radius at infinite frequency (1 = no numerical damping) [-]
+    # added mass normal to the canopy: this factor times rho pi c^2 / 4 per unit span with Lissaman & Brown's
+    # k_C = AR / (1 + AR) (AIAA-93-1236); 0 = none [-]
+    added_mass_factor: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -241,7 +249,7 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
+    "structure.added_mass_factor", "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
@@ -362,6 +370,8 @@ def _validate(cfg: Config) -> None:
                           f"got {cfg.dynamics.wing_point_mass_share}")
     if cfg.control.beta_min > 1.0:
         raise ConfigError(f"config key 'control.beta_min' must lie in [0, 1], got {cfg.control.beta_min}")
+    if not 0.0 <= cfg.structure.rho_inf <= 1.0:
+        raise ConfigError(f"config key 'structure.rho_inf' must lie in [0, 1], got {cfg.structure.rho_inf}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:
         raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
     if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 7:

@@ -74,6 +74,10 @@ def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
         return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=cfg.sim.surrogate_path or None,
                                         start=cfg.sim.surrogate_start,
                                         on_outside="fe" if cfg.sim.surrogate_fallback else "error")
+    if cfg.structure.dynamic:
+        from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
+
+        return DynamicFlightSimulator(cfg, wind, wing)
     return FlightSimulator(cfg, wind, wing)
 
 

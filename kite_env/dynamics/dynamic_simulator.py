@@ -1,0 +1,155 @@
+"""Flight with the wing that has inertia (``structure.dynamic: true``; :mod:`kite_env.dynamics.wing_dynamics`).
+
+The partition sits at the bridle lines: A-D are nodes of the FE wing, integrated implicitly with it; the KCU and the
+tether stay in the particle model. One step of ``dt``:
+
+1. the KCU's explicit RK4 step (forces of :class:`~kite_env.dynamics.particles.ParticleSystem`: gravity, the four
+   bridle lines of Eq. 10 and half their drag, the optional tether drag; the tether constraint ``|r_KCU| = l_t``
+   with Baumgarte's stabilisation, Eq. 12-13), with A-D moving on their Taylor expansion from the start of the step
+   (position, velocity and acceleration of the wing's nodes); then its projection onto the tether;
+2. the wing's generalized-alpha step in the frame K of the step's start, with the KCU at its new position
+   (:meth:`WingDynamics.step`);
+3. the new positions of A-D in W, the new frame K from them, and the wing's state re-expressed in it.
+
+Sub-stepping (:meth:`FlightSimulator.step`), the winch, the records and everything the environment reads are those
+of :class:`~kite_env.dynamics.simulator.FlightSimulator`; the start is its quasi-static start, from which the wing
+moves with the kite's velocity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kite_env.dynamics.particles import KCU, ParticleState
+from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord, _frame
+from kite_env.dynamics.wing_dynamics import WingDynamics, line_tension
+from kite_env.fsi import WingConvergenceError
+
+
+class DynamicFlightSimulator(FlightSimulator):
+    """:class:`FlightSimulator` with the FE wing integrated in time (module docstring)."""
+
+    def __init__(self, cfg, wind, wing=None, backend: str = "auto"):
+        super().__init__(cfg, wind, wing, backend)
+        self.dyn = WingDynamics(self.wing)
+        self._frame_now = None  # (origin, R) of frame K in which the wing's state is expressed
+
+    # ------------------------------------------------------------------ set-up
+    def reset(self, R0, e_t, speed_mps=None, t0: float = 0.0) -> StepRecord:
+        rec = super().reset(R0, e_t, speed_mps, t0)
+        st = self.state
+        origin, R, _, _, _, X, _ = self._flight_state(self.t, st)
+        self._frame_now = (origin, R)
+        x = self.wing.state.x
+        v_nodes = X.v_kite[None, :] + np.cross(X.omega[None, :], x)
+        g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
+        self.dyn.start(self.wing.state, v_nodes, R.T @ (st.r[KCU] - origin), R.T @ st.v[KCU], self.particles.rest,
+                       g_K, self.wing._downwashed(X).v_wind)
+        return rec
+
+    # ------------------------------------------------------------------ the KCU
+    def _kcu_acceleration(self, t: float, r_k, v_k, r_b, v_b):
+        """Acceleration (3,) of the KCU on the tether and the tether's multiplier at ``t``, A-D at ``r_b``, ``v_b``."""
+        p, d = self.particles, self.cfg.dynamics
+        wind = np.asarray(self.wind.velocity(t, np.vstack([r_b, r_k[None, :]])), dtype=float)
+        m = p.m[KCU]
+        f = np.array([0.0, 0.0, -m * d.gravity_mps2])
+        # bridle lines (Eq. 10, the wing's smoothed pull-only law) and half their drag (Eq. 11)
+        dl = r_b - r_k
+        l = np.linalg.norm(dl, axis=1)
+        e = dl / l[:, None]
+        T, _ = line_tension(d.line_stiffness_N_per_m * (l - p.rest)
+                            + d.line_damping_Ns_per_m * np.einsum("ij,ij->i", e, v_b - v_k))
+        f += T @ e
+        va = 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4])
+        van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
+        f += 0.5 * (self.dyn.line_drag * l * np.linalg.norm(van, axis=1)) @ van
+        if d.tether_diameter_m > 0.0:  # as ParticleSystem.forces
+            lt = float(np.linalg.norm(r_k))
+            et = r_k / lt
+            vt = 0.5 * v_k - wind[4]
+            vtn = vt - (vt @ et) * et
+            f += 0.5 * (-0.5 * p.rho * d.line_cd * d.tether_diameter_m * lt * np.linalg.norm(vtn)) * vtn
+        self._set_tether(t)
+        l, ld = p.tether_length, p.reel_speed
+        al = self.cfg.dynamics.baumgarte_1_per_s
+        g = 0.5 * (r_k @ r_k - l * l)
+        rhs = -(v_k @ v_k - ld * ld) - 2.0 * al * (r_k @ v_k - l * ld) - al * al * g
+        lam = m * (rhs - (r_k @ f) / m) / (r_k @ r_k)
+        return (f + lam * r_k) / m, lam
+
+    def _kcu_step(self, t: float, dt: float, a_b):
+        st = self.state
+        r_b0, v_b0 = st.r[:4], st.v[:4]
+
+        def ends(tau):
+            return r_b0 + tau * v_b0 + 0.5 * tau * tau * a_b, v_b0 + tau * a_b
+
+        def rhs(tau, r, v):
+            rb, vb = ends(tau)
+            a, lam = self._kcu_acceleration(t + tau, r, v, rb, vb)
+            return v, a, lam
+
+        r0, v0 = st.r[KCU], st.v[KCU]
+        k1v, k1a, lam = rhs(0.0, r0, v0)
+        k2v, k2a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a)
+        k3v, k3a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a)
+        k4v, k4a, _ = rhs(dt, r0 + dt * k3v, v0 + dt * k3a)
+        r = r0 + dt / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        v = v0 + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+            raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
+        self._set_tether(t + dt)
+        p = self.particles
+        drift = float(np.linalg.norm(r)) - p.tether_length
+        e = r / np.linalg.norm(r)
+        r = p.tether_length * e
+        v = v - (v @ e - p.reel_speed) * e
+        return r, v, lam, drift
+
+    # ------------------------------------------------------------------ stepping
+    def _step(self, dt: float) -> StepRecord:
+        t = self.t
+        st = self.state
+        dyn, wing = self.dyn, self.wing
+        origin, R = self._frame_now
+        self._t_step = t
+        b = dyn.bridle
+        r_k, v_k, lam, drift = self._kcu_step(t, dt, dyn.a[b] @ R.T)
+        X = self._flight_state(t, st)[5]
+        X_loads = wing._downwashed(X)
+        v_w_end = np.asarray(self.wind.velocity(t + dt, origin[None, :]), dtype=float).reshape(3)
+        g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
+        v_wind = R.T @ v_w_end + (X_loads.v_wind - X.v_wind)  # the wind at the step's end, with the downwash
+        try:
+            sol = dyn.step(dt, R.T @ (r_k - origin), R.T @ v_k, self.particles.rest, g_K, v_wind, X)
+        except WingConvergenceError as exc:
+            raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
+        if self.cfg.aero.induced_drag:
+            wing._update_downwash(sol, X, dt)
+        x_b, v_b = dyn.state.x[b], dyn.v[b]
+        r = np.vstack([origin + x_b @ R.T, r_k[None, :]])
+        v = np.vstack([v_b @ R.T, v_k[None, :]])
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+            raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
+        o2, R2 = _frame(r)
+        Q, p = R2.T @ R, R2.T @ (origin - o2)
+        dyn.rebase(Q, p)
+        self._frame_now = (o2, R2)
+        if wing._downwash is not None:
+            wing._downwash = (wing._downwash[0], Q @ wing._downwash[1])
+        sol.nodes = dyn.state.x.copy()
+        sol.F_b = sol.F_b @ Q.T
+        sol.aero_force = Q @ sol.aero_force
+        new = ParticleState(r, v)
+        self.state = new
+        self.t = t + dt
+        _, R_e, v_ke, om_e, v_we, _, _ = self._flight_state(self.t, new)
+        T, l = self.particles.line_forces(r, v)
+        rec = StepRecord(t=self.t, state=new.copy(), wing=sol, R_wk=R_e, v_kite=v_ke, omega=om_e, v_wind=v_we,
+                         line_tension=T, line_length=l, tether_force=float(-lam * self.tether_length),
+                         constraint_drift=np.array([drift, 0.0, 0.0]))
+        self.tether_length += dt * self.reel_speed
+        self._winch(rec.tether_force, dt)
+        rec.tether_length, rec.reel_speed = self.tether_length, self.reel_speed
+        return rec

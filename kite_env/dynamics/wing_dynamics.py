@@ -1,0 +1,417 @@
+"""The wing with inertia (``structure.dynamic``): the FE wing integrated in time with its own mass.
+
+The paper's wing is quasi-static: its 10 kg sit in four particles A-D, and the FE wing is solved for equilibrium at
+the bridle points the particles prescribe (Sect. II.D). Such a wing has no state to carry it through an event where
+no nearby equilibrium exists (a luffing or folding canopy): the step fails (docs/flight_model.md, section 10). Here
+the wing has mass and moves:
+
+* **Mass.** The lumped nodal masses of :func:`kite_env.dynamics.wing_mass.nodal_wing_mass` (Table 1's total, 70 %
+  on the LE tube), of which ``dynamics.wing_point_mass_share`` sits as Table 1's point masses on A-D (the tips'
+  inertia: spread by area alone, B and D get 1.7 g and the released tip diverges within 0.2 s of the start;
+  docs/flight_model.md, section 12), on the translations; the rotations are massless (quasi-static). A-D are wing
+  nodes: the partition moves to the bridle lines, the KCU and the tether stay in the particle model.
+* **Added mass** of the air moved by the canopy normal to its chord: the 2-D flat plate's ``rho pi c^2 / 4`` per
+  unit span (Newman, *Marine Hydrodynamics*, MIT Press 1977, Sect. 4.13, table of added masses), with
+  the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
+  on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
+  added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length.
+* **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
+  inflow of the wing's rigid-body motion at each section's 3/4-chord point (Pistolesi's point, as
+  ``aero.rotation_point``), plus the damping of each section's deviation from that motion through the section
+  damping of issue 19 (``W^T C W``, dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` with the frame
+  motion and the deformation velocity both taken from the wing's own nodes.
+* **Bridle lines** of Eq. (10) (spring-dampers, pulling only) from A-D to the KCU, whose position at the end of the
+  step is given (the staggered partition: the KCU's explicit step first, then the wing's implicit step); line drag
+  (Eq. 11), half to the wing end. Gravity on the nodal masses.
+* **Time integration:** generalized-alpha (Chung & Hulbert, "A time integration algorithm for structural dynamics
+  with improved numerical dissipation: the generalized-alpha method", J. Appl. Mech. 60, 371, 1993) with
+  ``alpha_m = (2 rho - 1) / (rho + 1)``, ``alpha_f = rho / (rho + 1)``, ``gamma = 1/2 - alpha_m + alpha_f``,
+  ``beta = (1 - alpha_m + alpha_f)^2 / 4`` from the spectral radius ``rho = structure.rho_inf`` (second order, 1 =
+  no dissipation). Nonlinear forces are averaged (Erlicher, Bonaventura & Bursi, Comput. Mech. 28, 83, 2002):
+  ``(1 - alpha_f) r(x_n+1) + alpha_f r(x_n) + M a_n+1-alpha_m = 0`` with ``r = f_int - f_ext``. The Newton solve is
+  the existing one (:class:`kite_env.structure.solver.StaticSolver`, banded LU on the same pattern) with a load
+  object that returns ``f_ext - alpha_f/(1-alpha_f) r_n - M a_n+1-alpha_m / (1-alpha_f)`` and the tangent
+  ``-d f_ext/dx - gamma/(beta dt) d f_ext/dv + (1-alpha_m)/((1-alpha_f) beta dt^2) M``.
+* **Frame.** Each step is made in the kite frame K of its start (from A-D), held fixed over the step (an inertial
+  frame for that step: no frame forces); between steps the state is re-expressed in the next step's frame, so the
+  wing stays close to its design pose in K (the section frames orient themselves by ``y_k``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from kite_env.aero.loads import load_jacobian, section_damping, section_loads
+from kite_env.aero.sections import section_geometry
+from kite_env.dynamics.wing_mass import nodal_wing_mass
+from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
+from kite_env.structure.rotations import expm, logm
+from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
+
+#: width of the smoothed pull-only law of the bridle lines [N] (:func:`line_tension`)
+LINE_SMOOTHING_N = 10.0
+
+
+def line_tension(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pull-only line tension from the spring-damper force ``s = k_c (l - L) + c_c dl/dt`` (Eq. 10) and its
+    derivative: ``T = (s + sqrt(s^2 + eps^2)) / 2`` with ``eps = LINE_SMOOTHING_N``, the smooth form of
+    ``max(s, 0)`` (at most ``eps / 2`` = 5 N from it). With the wing's nodes of grams at the trailing-edge tips, a
+    Newton correction of a centimetre changes the steering line's damper force by some 1000 N (``c_c gamma /
+    (beta dt)`` = 10^5 N/m at 5 ms): with the kink of ``max`` the iterates flip the line between taut and slack."""
+    s = np.asarray(s, dtype=float)
+    eps2 = LINE_SMOOTHING_N**2
+    root = np.sqrt(s * s + eps2)
+    # for s < 0 the same value without the cancellation of s + root: eps^2 / (2 (root - s))
+    T = np.where(s >= 0.0, 0.5 * (s + root), 0.5 * eps2 / (root - np.minimum(s, 0.0)))
+    return T, 0.5 * (1.0 + s / root)
+
+
+@dataclass(frozen=True)
+class AlphaParameters:
+    """Generalized-alpha parameters (Chung & Hulbert 1993, Eq. 25 and 17) from the spectral radius at infinite
+    frequency ``rho_inf`` in [0, 1]."""
+
+    alpha_m: float
+    alpha_f: float
+    gamma: float
+    beta: float
+
+    @classmethod
+    def from_rho_inf(cls, rho_inf: float) -> AlphaParameters:
+        if not 0.0 <= rho_inf <= 1.0:
+            raise ValueError(f"rho_inf must lie in [0, 1], got {rho_inf}")
+        am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
+        af = rho_inf / (rho_inf + 1.0)
+        return cls(am, af, 0.5 - am + af, 0.25 * (1.0 - am + af) ** 2)
+
+
+def added_mass(mesh, geometry, rho: float, factor: float, aspect_ratio: float) -> np.ndarray:
+    """Added mass of every section (n_sec,) [kg]: ``factor k_C rho pi c^2 w / 4`` with ``k_C = AR / (1 + AR)``
+    (module docstring)."""
+    k_c = aspect_ratio / (1.0 + aspect_ratio)
+    return factor * k_c * rho * np.pi * geometry.chord**2 * np.asarray(mesh.section_width, float) / 4.0
+
+
+class _StepLoad:
+    """External and inertial forces of one generalized-alpha step as a function of the Newton iterate (the load
+    protocol of :meth:`StaticSolver.solve`).
+
+    Section loads (the quasi-steady split of issue 19's consistent damping, now with the wing's own motion): the
+    loads of Eq. (2-9) at the iterate's shape with the inflow of the wing's *rigid-body* motion at each section's
+    rotation point (the mass-weighted rigid fit of the wing's velocities at the start of the step, held over it),
+    plus the damping forces of each section's deviation ``u_i = sum_j W_ij v_ij - u_ref,i`` from that motion,
+    ``f_ij = -W_ij C_i u_i`` with the section damping ``C_i = -dF_i/du`` of
+    :func:`kite_env.aero.loads.section_damping` (symmetric part positive semi-definite). The velocity is sampled
+    and the force returned with the same weights ``W`` (:meth:`WingDynamics.section_weights`), so the nodal damping
+    matrix ``W^T C W`` dissipates energy for every motion of the nodes. Sampling the velocity at the 3/4-chord point
+    but spreading the load change with the moment-matching distribution of Eq. 9 lets a single trailing-edge node
+    drive itself (it receives a small negative share of the lift change its own motion causes): a flutter of the TE
+    nodes at 20-80 Hz growing at 10-26 1/s in the linearised wing (docs/flight_model.md, section 12).
+    """
+
+    def __init__(self, dyn: WingDynamics, dt: float, r_kcu, v_kcu, rest, g_K, v_wind):
+        self.dyn, self.dt = dyn, dt
+        p = dyn.alpha
+        self.c_a = 1.0 / (p.beta * dt * dt)  # d a / d x
+        self.c_v = p.gamma / (p.beta * dt)  # d v / d x
+        self.x_pred = dyn.state.x + dt * dyn.v + dt * dt * (0.5 - p.beta) * dyn.a
+        self.v_pred = dyn.v + dt * (1.0 - p.gamma) * dyn.a
+        self.r_kcu, self.v_kcu = np.asarray(r_kcu, float), np.asarray(v_kcu, float)
+        self.rest, self.g_K = np.asarray(rest, float), np.asarray(g_K, float)
+        self.v_wind = np.asarray(v_wind, float)
+        self.tangent_key = ("dynamic", round(np.log(dt) / np.log(1.25)))
+        self.n_tangent = 0
+        self.loads = self.collapsed = None
+        self.f_phys = self.f_eff = None
+        self.line = None
+        # held over the step: the sampling weights, the rigid-body inflow and the section damping at the start
+        wing, mesh = dyn.wing, dyn.wing.mesh
+        x_sec0 = dyn.state.x[mesh.sections]
+        self.W = dyn.section_weights(x_sec0)
+        V, w = dyn.rigid_velocity()
+        r_p = np.einsum("ij,ijk->ik", self.W, x_sec0)  # rotation points
+        self.u_ref = V[None, :] + np.cross(w[None, :], r_p)
+        self.inflow = self.v_wind - self.u_ref  # "wind" of section_loads with v_kite = omega = 0
+        self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
+                                 self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+
+    def kinematics(self, st: NodalState):
+        a = (st.x - self.x_pred) * self.c_a
+        return a, self.v_pred + self.dt * self.dyn.alpha.gamma * a
+
+    def section_deviation(self, v: np.ndarray) -> np.ndarray:
+        """``u_i = sum_j W_ij v_ij - u_ref,i`` (n_sec, 3) [m/s]."""
+        return np.einsum("ij,ijk->ik", self.W, v[self.dyn.wing.mesh.sections]) - self.u_ref
+
+    def _lines(self, x, v):
+        d = x[self.dyn.bridle] - self.r_kcu
+        l = np.linalg.norm(d, axis=1)
+        e = d / l[:, None]
+        ldot = np.einsum("ij,ij->i", e, v[self.dyn.bridle] - self.v_kcu)
+        T, dT = line_tension(self.dyn.k_c * (l - self.rest) + self.dyn.c_c * ldot)
+        return e, l, T, dT
+
+    def force(self, st: NodalState) -> np.ndarray:
+        dyn, wing = self.dyn, self.dyn.wing
+        mesh = wing.mesh
+        a, v = self.kinematics(st)
+        self.collapsed = wing._update_tube_stiffness(st)
+        x_sec = st.x[mesh.sections]
+        zero = np.zeros(3)
+        self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
+                                   wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+        f_damp = -self.W[:, :, None] * np.einsum("ikl,il->ik", self.C, self.section_deviation(v))[:, None, :]
+        self.loads = dataclasses.replace(self.loads, nodal_forces=self.loads.nodal_forces + f_damp)
+        f = wing._load_vector(self.loads)
+        f6 = f.reshape(-1, 6)
+        # bridle lines, Eq. (10), and their drag, Eq. (11) (half to the wing end)
+        e, l, T, _ = self._lines(st.x, v)
+        self.line = (T, l, e)
+        f6[dyn.bridle, :3] -= T[:, None] * e
+        va = 0.5 * (v[dyn.bridle] + self.v_kcu) - self.v_wind_mid
+        van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
+        f6[dyn.bridle, :3] += 0.5 * dyn.line_drag * (l * np.linalg.norm(van, axis=1))[:, None] * van
+        f6[:, :3] += dyn.m_node[:, None] * self.g_K[None, :]
+        self.f_phys = f.copy()
+        p = dyn.alpha
+        a_m = (1.0 - p.alpha_m) * a + p.alpha_m * dyn.a
+        f6[:, :3] -= np.einsum("nij,nj->ni", dyn.M_blocks, a_m) / (1.0 - p.alpha_f)
+        f -= (p.alpha_f / (1.0 - p.alpha_f)) * dyn.r_prev
+        self.f_eff = f
+        return f
+
+    @property
+    def v_wind_mid(self):
+        return self.v_wind if self.v_wind.ndim == 1 else self.v_wind.mean(axis=0)
+
+    def tangent(self, st: NodalState) -> np.ndarray:
+        """``-d f_eff / d x`` on the pattern: ``K + c_v C + c_m M`` (:meth:`operators`)."""
+        p = self.dyn.alpha
+        c_m = (1.0 - p.alpha_m) / ((1.0 - p.alpha_f) * p.beta * self.dt * self.dt)
+        K, C, M = self.operators(st)
+        self.n_tangent += 1
+        return K + self.c_v * C + c_m * M
+
+    def operators(self, st: NodalState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pattern data of the linearised external forces at the iterate ``st``: stiffness ``K = -d f_ext / d x``
+        (aerodynamic loads at the held inflow, bridle lines), damping ``C = -d f_ext / d v`` (the sections'
+        ``W^T C_i W``, the line dampers) and mass ``M`` (nodal blocks with the added mass). With the structure's
+        tangent ``K_T``, ``M x'' + C x' + (K_T + K) x = 0`` is the wing's linearised motion."""
+        dyn, wing = self.dyn, self.dyn.wing
+        mesh = wing.mesh
+        asm = wing._mono_solvers["prescribed"].asm
+        _, v = self.kinematics(st)
+        x_sec = st.x[mesh.sections]
+        zero = np.zeros(3)
+        _, J = load_jacobian(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
+                             wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+        n_sec, m, _ = x_sec.shape
+        W = self.W
+        Cn = W[:, :, None, None, None] * W[:, None, None, :, None] * self.C[:, None, :, None, :]  # (i, j, k, n, l)
+        K = asm.block_data(-J)
+        C = asm.block_data(Cn.reshape(n_sec, 3 * m, 3 * m))
+        M = np.zeros(asm.nnz)
+        used = dyn.used_nodes
+        np.add.at(M, dyn.node_blocks[used].ravel(), dyn.M_blocks[used].ravel())
+        e, l, T, dT = self._lines(st.x, v)
+        ee = e[:, :, None] * e[:, None, :]
+        blk = dyn.node_blocks[dyn.bridle].ravel()
+        np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
+        np.add.at(C, blk, ((dT * dyn.c_c)[:, None, None] * ee).ravel())
+        return K, C, M
+
+
+class WingDynamics:
+    """Time integration of the FE wing with inertia (module docstring) in the frame of the current step.
+
+    State: the wing's :class:`NodalState` ``state``, nodal velocities ``v`` and accelerations ``a`` (n_nodes, 3)
+    [m/s, m/s^2] in the current frame, and the force residual ``r_prev = f_int - f_ext`` (n_dof,) of the last step
+    (generalized-alpha averages it with the new one).
+    """
+
+    def __init__(self, wing: AeroelasticWing):
+        self.wing = wing
+        cfg = wing.cfg
+        mesh = wing.mesh
+        self.alpha = AlphaParameters.from_rho_inf(cfg.structure.rho_inf)
+        self.bridle = np.asarray(mesh.bridle)
+        # dynamics.wing_point_mass_share of Table 1's masses as the paper's point masses on A-D, the rest spread
+        f = cfg.dynamics.wing_point_mass_share
+        self.m_node = (1.0 - f) * nodal_wing_mass(mesh, cfg.dynamics)
+        self.m_node[self.bridle] += f * np.array([cfg.dynamics.mass_le_kg, cfg.dynamics.mass_te_kg,
+                                                  cfg.dynamics.mass_le_kg, cfg.dynamics.mass_te_kg])
+        d = cfg.dynamics
+        self.k_c, self.c_c = float(d.line_stiffness_N_per_m), float(d.line_damping_Ns_per_m)
+        self.line_drag = -0.5 * cfg.aero.rho_kg_m3 * d.line_cd * d.line_diameter_m
+        asm = wing._mono_solvers["prescribed"].asm
+        self.solver = StaticSolver(asm, mode="modified", max_iter=cfg.fsi.max_newton_iter, contraction=0.5)
+        n = mesh.n_nodes
+        idx = asm.matrix(np.arange(1, asm.nnz + 1, dtype=float)).tocsr()
+        rows = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), np.int64)
+        cols = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), np.int64)
+        self.node_blocks = np.asarray(idx[rows.ravel(), cols.ravel()]).ravel().astype(np.int64).reshape(n, 3, 3) - 1
+        self.used_nodes = np.flatnonzero(asm._node_used)
+        if np.any(self.node_blocks[self.used_nodes] < 0):
+            raise RuntimeError("the wing's tangent pattern lacks a nodal translation block")
+        self.state: NodalState | None = None
+        self.v = self.a = self.r_prev = None
+        self.M_blocks = None
+        self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
+
+    # ------------------------------------------------------------------ pieces
+    def section_weights(self, x_sec: np.ndarray) -> np.ndarray:
+        """Weights (n_sec, m) of the section nodes' velocities in the velocity of each section's rotation point
+        (``aero.rotation_point``): the section's velocity field fitted, by least squares, as a linear function of
+        the chordwise coordinate to all its nodes, evaluated at the 3/4-chord point (or at the LE node for
+        ``"le_node"``). A rigid motion of the section is reproduced exactly; a motion of one node alone (a fluttering
+        trailing edge) enters with its share of the fit, not with the whole interpolation weight. Taken from the
+        chord line of the LE and TE nodes alone, the TE node's velocity weighs 0.7, and the TE node is driven by its
+        own share of the section's lift change: a flutter of the trailing-edge nodes at 20-80 Hz growing at 26 1/s
+        (linearised wing at the start of the baseline flight; docs/flight_model.md, section 12)."""
+        d = self.wing.mesh.section_tube_d
+        e = x_sec[:, -1] - x_sec[:, 0]
+        cn = np.linalg.norm(e, axis=1)
+        s = np.einsum("ijk,ik->ij", x_sec - x_sec[:, :1], e) / cn[:, None]  # (n_sec, m) along the chord [m]
+        if self.wing.cfg.aero.rotation_point == "three_quarter_chord":
+            s_p = 0.75 * (cn + 0.5 * d) - 0.5 * d
+        else:
+            s_p = np.zeros_like(cn)
+        ds = s - s.mean(axis=1, keepdims=True)
+        m = x_sec.shape[1]
+        return 1.0 / m + ds * ((s_p - s.mean(axis=1)) / np.einsum("ij,ij->i", ds, ds))[:, None]
+
+    def update_mass(self) -> None:
+        """Nodal mass blocks (n_nodes, 3, 3) [kg] at the current shape: structural mass plus the sections' added
+        mass along their normals (held over a step)."""
+        wing, mesh = self.wing, self.wing.mesh
+        M = self.m_node[:, None, None] * np.eye(3)[None]
+        f = wing.cfg.structure.added_mass_factor
+        if f > 0.0:
+            x_sec = self.state.x[mesh.sections]
+            geom = section_geometry(x_sec, mesh.section_tube_d)
+            m_a = added_mass(mesh, geom, wing.cfg.aero.rho_kg_m3, f, wing.aspect_ratio)
+            seg = np.linalg.norm(np.diff(x_sec, axis=1), axis=2)
+            trib = np.zeros(mesh.sections.shape)
+            trib[:, :-1] += 0.5 * seg
+            trib[:, 1:] += 0.5 * seg
+            share = m_a[:, None] * trib / trib.sum(axis=1, keepdims=True)  # (n_sec, m) [kg]
+            nn = geom.e_z[:, :, None] * geom.e_z[:, None, :]
+            np.add.at(M, mesh.sections.ravel(), (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3))
+        self.M_blocks = M
+
+    # ------------------------------------------------------------------ state
+    def start(self, state: NodalState, v_nodes: np.ndarray, r_kcu, v_kcu, rest, g_K, v_wind) -> None:
+        """Start from ``state`` moving with ``v_nodes`` (n_nodes, 3); the accelerations from the equation of motion
+        at the start (``M a_0 = f_ext - f_int``, the rotations in equilibrium as they are)."""
+        self.state = state.copy()
+        self._prev = None
+        self.v = np.asarray(v_nodes, float).copy()
+        self.a = np.zeros_like(self.v)
+        self.r_prev = np.zeros(self.wing.n_dof)
+        self.update_mass()
+        load = _StepLoad(self, 1.0, r_kcu, v_kcu, rest, g_K, v_wind)
+        load.x_pred = self.state.x  # a = 0 at the iterate, v = v_nodes
+        load.v_pred = self.v
+        load.force(self.state)
+        f_int, _ = self.solver.asm.assemble(self.state.x, self.state.Rn, tangent=False)
+        r = f_int - load.f_phys
+        r[self.solver.auto_fixed] = 0.0
+        r6 = r.reshape(-1, 6)
+        self.a = -np.linalg.solve(self.M_blocks, r6[:, :3][:, :, None])[:, :, 0]
+        r6[:, :3] = -np.einsum("nij,nj->ni", self.M_blocks, self.a)  # M a_0 + r_0 = 0
+        self.r_prev = r
+
+    def rebase(self, Q: np.ndarray, p: np.ndarray) -> None:
+        """Re-express the state in a new frame: ``x' = Q x + p``, vectors ``Q v``, rotations ``Q R``."""
+        st = self.state
+        self.state = NodalState(st.x @ Q.T + p, Q @ st.Rn)
+        self.v = self.v @ Q.T
+        self.a = self.a @ Q.T
+        r6 = self.r_prev.reshape(-1, 2, 3) @ Q.T
+        self.r_prev = r6.reshape(-1)
+        self.wing.state = self.state
+        if self._prev is not None:
+            prev, dt_prev = self._prev
+            self._prev = (NodalState(prev.x @ Q.T + p, Q @ prev.Rn), dt_prev)
+
+    def step(self, dt: float, r_kcu, v_kcu, rest, g_K, v_wind, flight: FlightState):
+        """One generalized-alpha step of ``dt`` with the KCU at ``r_kcu`` (its velocity ``v_kcu``) at the end of the
+        step, steering rest lengths ``rest`` (4,), gravity ``g_K`` and wind ``v_wind`` (3,) in the step's frame.
+        ``flight`` (the frame's motion) only decomposes the totals into lift and drag. Returns the
+        :class:`WingSolution` (``F_b``: the bridle lines' forces on A-D) and commits the new state; raises
+        :class:`WingConvergenceError` and leaves the state as it was when Newton fails."""
+        wing = self.wing
+        fcfg = wing.cfg.fsi
+        self.update_mass()
+        load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind)
+        start = self._predict(dt)
+        history: list[dict] = []
+        res = None
+        for attempt in range(2):
+            try:
+                res = self.solver.solve(start, None, (), load=load, tol_force=fcfg.tol_force_rel,
+                                        tol_disp=fcfg.tol_disp_m, accept_force=fcfg.accept_force_rel)
+                break
+            except ConvergenceError as exc:
+                history.append({"iter": len(history) + 1, "newton_iters": len(exc.history), "dx_max_m": np.nan,
+                                "dload_rel": np.nan,
+                                "residual_history": exc.history, "dynamic": True})
+                self.solver.forget_factorization()
+                if attempt == 1:
+                    raise WingConvergenceError(f"dynamic wing step failed: {exc}", history) from exc
+                start = self.state.copy()
+        st = res.state
+        if res.accepted:
+            load.force(st)
+        a, v = load.kinematics(st)
+        r = res.reactions + (load.f_eff - load.f_phys)
+        r[self.solver.auto_fixed] = 0.0
+        history.append({"iter": len(history) + 1, "newton_iters": res.iterations, "residual_N": res.history[-1][1],
+                        "dx_max_m": res.history[-2][2] if len(res.history) > 1 else 0.0, "dload_rel": 0.0,
+                        "factorizations": res.factorizations, "accepted": res.accepted, "method": "dynamic"})
+        self._prev = (self.state, dt)
+        self.state, self.v, self.a, self.r_prev = st, v, a, r
+        wing.state = st
+        T, _, e = load.line
+        wing._free_flight = flight
+        sol = wing._solution(st, load.loads, -T[:, None] * e, flight, 1.0, history, res.iterations, load.collapsed,
+                             res.accepted)
+        return sol
+
+    def _predict(self, dt: float) -> NodalState:
+        """Start of Newton: the last step's change of shape repeated (positions ``x_n + r (x_n - x_n-1)``, rotations
+        turned again by their last change, ``r = dt / dt_n-1``; as :meth:`AeroelasticWing._predict`), or on the first
+        step the wing moved rigidly with its mass-weighted rigid-body velocity. Not ``x_n + dt v_n``: the velocities
+        of the stiff, light modes (a tip node of grams on its rod) are large and alternate from step to step under
+        the numerical damping while their displacements stay small."""
+        st = self.state
+        if self._prev is None:
+            V, w = self.rigid_velocity()
+            return NodalState(st.x + dt * (V[None, :] + np.cross(w[None, :], st.x)), expm(dt * w) @ st.Rn)
+        prev, dt_prev = self._prev
+        r = min(dt / dt_prev, 2.0)
+        D = st.Rn @ prev.Rn.transpose(0, 2, 1)
+        if r != 1.0:
+            D = expm(r * logm(D))
+        Rn = D @ st.Rn
+        return NodalState(st.x + r * (st.x - prev.x), 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
+
+    def rigid_velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mass-weighted least-squares rigid-body fit of the nodal velocities: ``(V, omega)`` with the velocity field
+        ``V + omega x x`` (structural masses; frame of the step)."""
+        m, x, v = self.m_node, self.state.x, self.v
+        M = m.sum()
+        c = (m @ x) / M
+        vc = (m @ v) / M
+        r = x - c
+        H = np.einsum("n,nk->k", m, np.cross(r, v - vc))
+        J = np.einsum("n,nk,nk->", m, r, r) * np.eye(3) - np.einsum("n,ni,nj->ij", m, r, r)
+        w = np.linalg.solve(J, H)
+        return vc - np.cross(w, c), w
+
+    def kinetic_energy(self) -> float:
+        """``1/2 sum v . M v`` [J] with the current mass blocks (structural and added mass)."""
+        return 0.5 * float(np.einsum("ni,nij,nj->", self.v, self.M_blocks, self.v))
