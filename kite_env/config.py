@@ -57,6 +57,10 @@ class StructureConfig:
     # added mass normal to the canopy: this factor times rho pi c^2 / 4 per unit span with Lissaman & Brown's
     # k_C = AR / (1 + AR) (AIAA-93-1236); 0 = none [-]
     added_mass_factor: float = 1.0
+    # structural damping of the wing with inertia: stiffness-proportional (Rayleigh) C = beta K_T on the nodal
+    # translations, beta = 2 zeta / omega_ref: 2 % of critical at 10 Hz, the level of the paper's relative damping
+    # coefficients of the wing (Table 1: 0.015-0.02); 0 = none [s]
+    rayleigh_beta_s: float = 6.4e-4
 
 
 @dataclass(frozen=True)
@@ -249,7 +253,7 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "structure.added_mass_factor", "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
+    "structure.added_mass_factor", "structure.rayleigh_beta_s", "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",

@@ -20,6 +20,9 @@ the wing has mass and moves:
   ``aero.rotation_point``), plus the damping of each section's deviation from that motion through the section
   damping of issue 19 (``W^T C W``, dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` with the frame
   motion and the deformation velocity both taken from the wing's own nodes.
+* **Structural damping**: stiffness-proportional (Rayleigh) ``beta K_T(x_n)`` on the nodal translations, acting on
+  the motion relative to the rigid-body motion, ``beta = structure.rayleigh_beta_s`` (2 % of critical at 10 Hz by
+  default, the level of the relative damping coefficients the paper gives its wing, Table 1).
 * **Bridle lines** of Eq. (10) (spring-dampers, pulling only) from A-D to the KCU, whose position at the end of the
   step is given (the staggered partition: the KCU's explicit step first, then the wing's implicit step); line drag
   (Eq. 11), half to the wing end. Gravity on the nodal masses.
@@ -137,6 +140,15 @@ class _StepLoad:
         self.inflow = self.v_wind - self.u_ref  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
                                  self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+        # structural (Rayleigh) damping beta K_T(x_n) on the translations, of the motion relative to the rigid one
+        self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
+        self.K0 = None
+        if self.beta_K > 0.0:
+            asm = wing._mono_solvers["prescribed"].asm
+            _, kd = asm.assemble_data(dyn.state.x, dyn.state.Rn, tangent=True)
+            self.K0_data = self.beta_K * kd * dyn.tt_mask
+            self.K0 = asm.matrix(self.K0_data).tocsr()
+            self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
 
     def kinematics(self, st: NodalState):
         a = (st.x - self.x_pred) * self.c_a
@@ -167,6 +179,10 @@ class _StepLoad:
         self.loads = dataclasses.replace(self.loads, nodal_forces=self.loads.nodal_forces + f_damp)
         f = wing._load_vector(self.loads)
         f6 = f.reshape(-1, 6)
+        if self.K0 is not None:
+            dv = np.zeros_like(f6)
+            dv[:, :3] = v - self.v_rigid
+            f -= self.K0 @ dv.ravel()
         # bridle lines, Eq. (10), and their drag, Eq. (11) (half to the wing end)
         e, l, T, _ = self._lines(st.x, v)
         self.line = (T, l, e)
@@ -221,6 +237,8 @@ class _StepLoad:
         blk = dyn.node_blocks[dyn.bridle].ravel()
         np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
         np.add.at(C, blk, ((dT * dyn.c_c)[:, None, None] * ee).ravel())
+        if self.K0 is not None:
+            C += self.K0_data
         return K, C, M
 
 
@@ -254,6 +272,8 @@ class WingDynamics:
         cols = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), np.int64)
         self.node_blocks = np.asarray(idx[rows.ravel(), cols.ravel()]).ravel().astype(np.int64).reshape(n, 3, 3) - 1
         self.used_nodes = np.flatnonzero(asm._node_used)
+        dof_r = np.repeat(np.arange(asm.n_dof), np.diff(asm.indptr))  # column of each pattern entry (CSC)
+        self.tt_mask = ((asm.indices % 6 < 3) & (dof_r % 6 < 3)).astype(float)  # translation-translation entries
         if np.any(self.node_blocks[self.used_nodes] < 0):
             raise RuntimeError("the wing's tangent pattern lacks a nodal translation block")
         self.state: NodalState | None = None
