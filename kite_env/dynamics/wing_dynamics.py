@@ -16,10 +16,11 @@ the wing has mass and moves:
   on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
   added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length.
 * **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
-  inflow of the wing's rigid-body motion at each section's 3/4-chord point (Pistolesi's point, as
-  ``aero.rotation_point``), plus the damping of each section's deviation from that motion through the section
-  damping of issue 19 (``W^T C W``, dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` with the frame
-  motion and the deformation velocity both taken from the wing's own nodes.
+  inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
+  damping of each section's deviation from it, rotation and deformation together, through the section damping of
+  issue 19 (``W^T C W`` with the velocity sampled at the 3/4-chord point, Pistolesi's point as
+  ``aero.rotation_point``; dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` taken from the wing's
+  own nodes.
 * **Structural damping**: stiffness-proportional (Rayleigh) ``beta K_T(x_n)`` on the nodal translations, acting on
   the motion relative to the rigid-body motion, ``beta = structure.rayleigh_beta_s`` (2 % of critical at 10 Hz by
   default, the level of the relative damping coefficients the paper gives its wing, Table 1).
@@ -103,16 +104,16 @@ class _StepLoad:
     protocol of :meth:`StaticSolver.solve`).
 
     Section loads (the quasi-steady split of issue 19's consistent damping, now with the wing's own motion): the
-    loads of Eq. (2-9) at the iterate's shape with the inflow of the wing's *rigid-body* motion at each section's
-    rotation point (the mass-weighted rigid fit of the wing's velocities at the start of the step, held over it),
-    plus the damping forces of each section's deviation ``u_i = sum_j W_ij v_ij - u_ref,i`` from that motion,
-    ``f_ij = -W_ij C_i u_i`` with the section damping ``C_i = -dF_i/du`` of
-    :func:`kite_env.aero.loads.section_damping` (symmetric part positive semi-definite). The velocity is sampled
-    and the force returned with the same weights ``W`` (:meth:`WingDynamics.section_weights`), so the nodal damping
-    matrix ``W^T C W`` dissipates energy for every motion of the nodes. Sampling the velocity at the 3/4-chord point
-    but spreading the load change with the moment-matching distribution of Eq. 9 lets a single trailing-edge node
-    drive itself (it receives a small negative share of the lift change its own motion causes): a flutter of the TE
-    nodes at 20-80 Hz growing at 10-26 1/s in the linearised wing (docs/flight_model.md, section 12).
+    loads of Eq. (2-9) at the iterate's shape with the inflow of the wing's rigid translation ``u_ref`` (the
+    mass-weighted rigid fit of the wing's velocities at the start of the step, held over it), plus the damping
+    forces of each section's deviation ``u_i = sum_j W_ij v_ij - u_ref`` from it, ``f_ij = -W_ij C_i u_i``, with the
+    section damping ``C_i = -dF_i/du`` of :func:`kite_env.aero.loads.section_damping` (symmetric part positive
+    semi-definite). The velocity is sampled and the force returned with the same weights ``W``
+    (:meth:`WingDynamics.section_weights`), so the nodal damping matrix ``W^T C W`` dissipates energy for every motion
+    of the nodes. Two alternatives were linearised or flown and rejected (docs/flight_model.md, section 12): the
+    inflow of the 3/4-chord point's own velocity with the load change spread by the moment law of Eq. 9 lets a
+    single trailing-edge node drive itself (a TE flutter at 20-80 Hz growing at 10-26 1/s); the rigid rotation in
+    the reference inflow (its load change spread by the moment law, one step behind) drives the 3 Hz yaw/twist mode.
     """
 
     def __init__(self, dyn: WingDynamics, dt: float, r_kcu, v_kcu, rest, g_K, v_wind):
@@ -136,7 +137,13 @@ class _StepLoad:
         self.W = dyn.section_weights(x_sec0)
         V, w = dyn.rigid_velocity()
         r_p = np.einsum("ij,ijk->ik", self.W, x_sec0)  # rotation points
-        self.u_ref = V[None, :] + np.cross(w[None, :], r_p)
+        # the reference inflow is the wing's rigid translation only: its rotation (yaw, roll, pitch rates) enters,
+        # with the deformation, through the dissipative deviation damping. Taken into the reference (each
+        # section's load at the inflow of V + omega x r_p, held over the step, its change spread by the moment law
+        # of Eq. 9), it drives the 3 Hz yaw/twist mode: the held 0.3 m input's yaw-rate oscillation grew from
+        # 0.66 to 1.22 rad/s in 0.5 s and the wing folded at 1.5 s; with it here the oscillation decays like the
+        # quasi-static wing's (docs/flight_model.md, section 12)
+        self.u_ref = np.broadcast_to(V, r_p.shape).copy()
         self.inflow = self.v_wind - self.u_ref  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
                                  self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
