@@ -272,7 +272,8 @@ class WingDynamics:
         self.k_c, self.c_c = float(d.line_stiffness_N_per_m), float(d.line_damping_Ns_per_m)
         self.line_drag = -0.5 * cfg.aero.rho_kg_m3 * d.line_cd * d.line_diameter_m
         asm = wing._mono_solvers["prescribed"].asm
-        self.solver = StaticSolver(asm, mode="modified", max_iter=cfg.fsi.max_newton_iter, contraction=0.5)
+        self.solver = StaticSolver(asm, mode="modified", max_iter=cfg.fsi.max_newton_iter, contraction=0.5,
+                                   nodal_rot_limit=True)
         n = mesh.n_nodes
         idx = asm.matrix(np.arange(1, asm.nnz + 1, dtype=float)).tocsr()
         rows = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), np.int64)

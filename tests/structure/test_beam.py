@@ -346,3 +346,21 @@ def test_cantilever_first_natural_frequency_with_lumped_masses():
         errs.append(abs(np.sqrt(w2.min()) - exact) / exact)
     assert errs[-1] < 0.01
     assert errs[0] > errs[1] > errs[2]
+
+
+def test_nodal_rotation_limit_reaches_the_same_equilibrium():
+    """StaticSolver(nodal_rot_limit=True) clamps only the nodes whose rotation increment exceeds max_rot_rad: the
+    same equilibrium as the global scaling (a cantilever rolled by a tip moment to a half circle in one load step)."""
+    L, EI, n = 1.0, 2.0, 16
+    X0, bs = straight_cantilever(n, L, EA=1e4, EI2=EI, EI3=EI, GJ=EI)
+    load = np.r_[0.0, 0.0, 0.0, 0.0, np.pi * EI / L, 0.0]  # a half turn about y
+    results = {}
+    for nodal in (False, True):
+        asm = Assembler(X0.shape[0], [bs])
+        solver = StaticSolver(asm, max_iter=200, nodal_rot_limit=nodal)
+        f = np.zeros(asm.n_dof)
+        f[-6:] = load
+        results[nodal] = solver.solve(NodalState.reference(X0), f, fixed_dofs=FIX_ROOT)
+    assert np.allclose(results[True].state.x, results[False].state.x, atol=1e-6)
+    # the circle of radius L / pi: the tip back over the root at height 2 L / pi
+    assert results[True].state.x[-1] == pytest.approx([0.0, 0.0, -2.0 * L / np.pi], abs=2e-3)
