@@ -154,7 +154,7 @@ def is_crash(termination_reason: str | None) -> bool:
 
 def evaluation_config(cfg: Config, duration_s: float | None = None, randomize: bool = False) -> Config:
     """``cfg`` with the environment set up for an evaluation at the configured conditions: the wind section as it
-    is (no randomisation), the start at the crossing at ``sim.initial_speed_mps``, episodes of ``duration_s``
+    is (no randomisation), the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``), episodes of ``duration_s``
     (default ``sim.duration_s``). ``randomize``: draw wind and start from the ``env`` ranges instead. The
     training-only start rule ``sim.surrogate_start: table_only`` (a trained model's config) becomes ``table``: an
     evaluation starts every episode it draws, as the full model does."""

@@ -109,3 +109,13 @@ def test_agent_recipes_pin_the_legacy_model_the_fast_fidelity_was_fitted_to():
     for algo in ("ppo", "sac"):
         env = load_hyperparameters(root / "agents" / f"{algo}.yaml", algo, FAST_ENV_ID)["env"]
         assert {k: env[k] for k in flat} == flat
+
+
+def test_start_speed_can_follow_the_wind():
+    from kite_env.config import load_config
+
+    assert load_config(None, []).start_speed_mps == 22.0
+    cfg = load_config(None, ["sim.initial_speed_per_wind=4.4", "wind.speed_mps=7"])
+    assert cfg.start_speed_mps == pytest.approx(30.8)
+    with pytest.raises(ConfigError, match="sim.initial_speed_per_wind"):
+        load_config(None, ["sim.initial_speed_per_wind=-1"])

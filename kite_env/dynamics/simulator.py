@@ -138,7 +138,7 @@ class FlightSimulator:
         lines carry their share of the initial wing force (the controllers adjust them from there).
         """
         cfg = self.cfg
-        speed = cfg.sim.initial_speed_mps if speed_mps is None else float(speed_mps)
+        speed = cfg.start_speed_mps if speed_mps is None else float(speed_mps)
         R0 = np.asarray(R0, float) / np.linalg.norm(R0)
         e_t = np.asarray(e_t, float)
         e_t = e_t - (e_t @ R0) * R0

@@ -134,7 +134,7 @@ class KiteFigureEightEnv(gym.Env):
     along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]``; the wing in
     static aeroelastic equilibrium on its bridle. Wind speed, turbulence intensity and turbulence realisation are drawn
     from ``self.np_random`` (ranges in the ``env`` section). With ``env.randomize = false`` nothing is drawn: the
-    ``wind`` section as configured, the start at the crossing at ``sim.initial_speed_mps`` (``kite-eval``).
+    ``wind`` section as configured, the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``) (``kite-eval``).
     ``reset(options={"wind_seed": n})`` fixes the turbulence realisation.
 
     ## Episode End
@@ -222,7 +222,7 @@ class KiteFigureEightEnv(gym.Env):
                 v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
             else:  # the configured conditions (kite-eval): nothing drawn
                 wind_speed, ti = self.cfg.wind.speed_mps, self.cfg.wind.turbulence_intensity
-                wind_seed, s0, v0 = self.cfg.wind.seed, 0.0, self.cfg.sim.initial_speed_mps
+                wind_seed, s0, v0 = self.cfg.wind.seed, 0.0, self.cfg.start_speed_mps
             if "wind_seed" in options:
                 wind_seed = int(options["wind_seed"])
             wind_cfg = dataclasses.replace(self.cfg.wind, speed_mps=wind_speed, turbulence_intensity=ti, seed=wind_seed)

@@ -210,3 +210,12 @@ def test_a_step_whose_wing_fails_is_made_in_halves(monkeypatch):
     failing(no_split, [0.005])
     with pytest.raises(SimulationError):
         no_split.step(no_split.L_B0, no_split.L_D0)
+
+
+def test_reset_starts_at_the_wind_scaled_speed():
+    cfg = dataclasses.replace(Config(), sim=dataclasses.replace(Config().sim, initial_speed_per_wind=4.4),
+                              wind=dataclasses.replace(Config().wind, speed_mps=7.0))
+    sim = FlightSimulator(cfg, UniformWind(7.0))
+    el = np.deg2rad(30.0)
+    rec = sim.reset(np.array([np.cos(el), 0.0, np.sin(el)]), np.array([-np.sin(el), 0.0, np.cos(el)]))
+    assert np.linalg.norm(rec.state.v[4]) == pytest.approx(30.8, rel=1e-6)
