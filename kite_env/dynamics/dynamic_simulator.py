@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kite_env.dynamics.particles import KCU, ParticleState
-from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord, _frame
+from kite_env.dynamics.particles import KCU, ParticleState, line_drag, tether_drag
+from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.dynamics.wing_dynamics import WingDynamics, line_tension
 from kite_env.fsi import WingConvergenceError
 
@@ -29,10 +29,13 @@ from kite_env.fsi import WingConvergenceError
 class DynamicFlightSimulator(FlightSimulator):
     """:class:`FlightSimulator` with the FE wing integrated in time (module docstring)."""
 
+    particle_wing = False  # A-D are wing nodes: no tip dampers, no condensed wing mass
+
     def __init__(self, cfg, wind, wing=None, backend: str = "auto"):
         super().__init__(cfg, wind, wing, backend)
         self.dyn = WingDynamics(self.wing)
         self._frame_now = None  # (origin, R) of frame K in which the wing's state is expressed
+        self._X_now = None  # (particle state, its wing state X): computed for the last record, reused by the next step
 
     # ------------------------------------------------------------------ set-up
     def reset(self, R0, e_t, speed_mps=None, t0: float = 0.0) -> StepRecord:
@@ -40,6 +43,7 @@ class DynamicFlightSimulator(FlightSimulator):
         st = self.state
         origin, R, _, _, _, X, _ = self._flight_state(self.t, st)
         self._frame_now = (origin, R)
+        self._X_now = (st, X)
         x = self.wing.state.x
         v_nodes = X.v_kite[None, :] + np.cross(X.omega[None, :], x)
         g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
@@ -61,15 +65,9 @@ class DynamicFlightSimulator(FlightSimulator):
         T, _ = line_tension(d.line_stiffness_N_per_m * (l - p.rest)
                             + d.line_damping_Ns_per_m * np.einsum("ij,ij->i", e, v_b - v_k))
         f += T @ e
-        va = 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4])
-        van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
-        f += 0.5 * (self.dyn.line_drag * l * np.linalg.norm(van, axis=1)) @ van
-        if d.tether_diameter_m > 0.0:  # as ParticleSystem.forces
-            lt = float(np.linalg.norm(r_k))
-            et = r_k / lt
-            vt = 0.5 * v_k - wind[4]
-            vtn = vt - (vt @ et) * et
-            f += 0.5 * (-0.5 * p.rho * d.line_cd * d.tether_diameter_m * lt * np.linalg.norm(vtn)) * vtn
+        f += 0.5 * line_drag(self.dyn.line_drag, 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4]), e, l).sum(axis=0)
+        if d.tether_diameter_m > 0.0:
+            f += tether_drag(-0.5 * p.rho * d.line_cd * d.tether_diameter_m, r_k, v_k, wind[4])
         self._set_tether(t)
         l, ld = p.tether_length, p.reel_speed
         al = self.cfg.dynamics.baumgarte_1_per_s
@@ -116,7 +114,7 @@ class DynamicFlightSimulator(FlightSimulator):
         self._t_step = t
         b = dyn.bridle
         r_k, v_k, lam, drift = self._kcu_step(t, dt, dyn.a[b] @ R.T)
-        X = self._flight_state(t, st)[5]
+        X = self._X_now[1] if self._X_now is not None and self._X_now[0] is st else self._flight_state(t, st)[5]
         X_loads = wing._downwashed(X)
         v_w_end = np.asarray(self.wind.velocity(t + dt, origin[None, :]), dtype=float).reshape(3)
         g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
@@ -132,21 +130,21 @@ class DynamicFlightSimulator(FlightSimulator):
         v = np.vstack([v_b @ R.T, v_k[None, :]])
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
             raise SimulationError("non-finite particle state", f"t = {t + dt:.4f} s")
-        o2, R2 = _frame(r)
+        new = ParticleState(r, v)
+        o2, R2, v_ke, om_e, v_we, X_e, _ = self._flight_state(t + dt, new)  # the next frame, and the record's state
         Q, p = R2.T @ R, R2.T @ (origin - o2)
         dyn.rebase(Q, p)
         self._frame_now = (o2, R2)
+        self._X_now = (new, X_e)  # the wing state of the next step's start
         if wing._downwash is not None:
             wing._downwash = (wing._downwash[0], Q @ wing._downwash[1])
         sol.nodes = dyn.state.x.copy()
         sol.F_b = sol.F_b @ Q.T
         sol.aero_force = Q @ sol.aero_force
-        new = ParticleState(r, v)
         self.state = new
         self.t = t + dt
-        _, R_e, v_ke, om_e, v_we, _, _ = self._flight_state(self.t, new)
         T, l = self.particles.line_forces(r, v)
-        rec = StepRecord(t=self.t, state=new.copy(), wing=sol, R_wk=R_e, v_kite=v_ke, omega=om_e, v_wind=v_we,
+        rec = StepRecord(t=self.t, state=new.copy(), wing=sol, R_wk=R2, v_kite=v_ke, omega=om_e, v_wind=v_we,
                          line_tension=T, line_length=l, tether_force=float(-lam * self.tether_length),
                          constraint_drift=np.array([drift, 0.0, 0.0]))
         self.tether_length += dt * self.reel_speed

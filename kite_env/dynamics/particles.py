@@ -48,6 +48,25 @@ class ParticleState:
         return ParticleState(self.r.copy(), self.v.copy())
 
 
+def line_drag(coef: float, va: np.ndarray, e: np.ndarray, l: np.ndarray) -> np.ndarray:
+    """Drag of straight lines, Eq. (11) (n, 3) [N]: ``coef l |v_n| v_n`` with ``v_n`` the part of each line's
+    apparent wind ``va`` (n, 3) normal to its direction ``e`` (n, 3), ``l`` (n,) the lengths and ``coef = -1/2 rho
+    C_D d``. Half of it goes to each end."""
+    van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
+    return coef * (l * np.sqrt(np.einsum("ij,ij->i", van, van)))[:, None] * van
+
+
+def tether_drag(coef: float, r_kcu: np.ndarray, v_kcu: np.ndarray, wind_kcu: np.ndarray) -> np.ndarray:
+    """The KCU's half of the optional tether drag (not in the paper's model) (3,) [N]: Eq. (11) for the tether as
+    one straight line from the ground station, with the mean velocity of its ends (the ground end at rest) and the
+    wind at the KCU; ``coef = -1/2 rho C_D d_t``."""
+    lt = float(np.linalg.norm(r_kcu))
+    et = r_kcu / lt
+    vt = 0.5 * v_kcu - wind_kcu
+    vtn = vt - (vt @ et) * et
+    return 0.5 * (coef * lt * np.linalg.norm(vtn)) * vtn
+
+
 def _dist_rows(r: np.ndarray, v: np.ndarray, i: np.ndarray, j: np.ndarray):
     d = r[i] - r[j]
     l = np.sqrt(np.einsum("ij,ij->i", d, d))
@@ -151,19 +170,11 @@ class ParticleSystem:
         f[KCU] += (T[:, None] * e).sum(axis=0)
         # line drag, Eq. (11): normal component of the apparent wind of each line, half to each end
         va = 0.5 * (v[self._li] + v[self._lj]) - 0.5 * (wind[self._li] + wind[self._lj])
-        van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
-        fd = (-0.5 * self.rho * cfg.line_cd * cfg.line_diameter_m) * (l * np.sqrt(np.einsum("ij,ij->i", van, van)))[
-            :, None] * van
+        fd = line_drag(-0.5 * self.rho * cfg.line_cd * cfg.line_diameter_m, va, e, l)
         f[:4] += 0.5 * fd
         f[KCU] += 0.5 * fd.sum(axis=0)
         if cfg.tether_diameter_m > 0.0:
-            # optional tether drag (not in the paper's model): Eq. (11) for the tether as one straight line, with the
-            # mean velocity of its ends (the ground end at rest) and the wind at the KCU; half to the KCU
-            lt = float(np.linalg.norm(r[KCU]))
-            et = r[KCU] / lt
-            vt = 0.5 * v[KCU] - wind[KCU]
-            vtn = vt - (vt @ et) * et
-            f[KCU] += 0.5 * (-0.5 * self.rho * cfg.line_cd * cfg.tether_diameter_m * lt * np.linalg.norm(vtn)) * vtn
+            f[KCU] += tether_drag(-0.5 * self.rho * cfg.line_cd * cfg.tether_diameter_m, r[KCU], v[KCU], wind[KCU])
         # relative damping between the wing points (dashpots along the pairs)
         _, _, ep, pdot = _dist_rows(r, v, self._pi, self._pj)
         fp = (self.pair_damping * pdot)[:, None] * ep

@@ -99,6 +99,10 @@ class FlightSimulator:
 
     #: the wing model now flying (the fast fidelity reports "fe" after a fallback)
     fidelity_now = "fe"
+    #: A-D are particles that carry the quasi-static wing's reaction: the start measures the wing's stiffness between
+    #: them for the tip dampers and condenses the wing's distributed mass onto them (False: the wing with inertia,
+    #: whose A-D are wing nodes; no tip dampers, ``pair_stiffness`` zero)
+    particle_wing = True
 
     def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None, backend: str = "auto"):
         from kite_env.polar import nominal_wing
@@ -186,7 +190,7 @@ class FlightSimulator:
         rec = self._solve_wing(first=True)
         rec.tether_length = self.tether_length
         f = cfg.dynamics.wing_point_mass_share
-        if f < 1.0:  # the wing's mass: a share at the four points, the rest distributed and condensed (wing_mass.py)
+        if f < 1.0 and self.particle_wing:  # the wing mass: a share at the four points, the rest condensed onto them
             M = condensed_wing_mass(wing, nodal_wing_mass(wing.mesh, cfg.dynamics), shape=rec.wing.nodes)
             self.particles.set_wing_mass((1.0 - f) * M + f * np.diag(np.repeat(self.particles.m[:4], 3)))
         return rec
@@ -202,7 +206,8 @@ class FlightSimulator:
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge at the initial state", str(exc).splitlines()[0]) from exc
         q0 = sol.nodes[wing.bridle].copy()
-        return q0, sol.F_b.copy(), tip_stiffness(wing, q0, X, sol)
+        k_pairs = tip_stiffness(wing, q0, X, sol) if self.particle_wing else np.zeros(len(DAMPED_PAIRS))
+        return q0, sol.F_b.copy(), k_pairs
 
     # ------------------------------------------------------------------ stepping
     def _solve_wing(self, first: bool = False, commit: bool = True, state: ParticleState | None = None,

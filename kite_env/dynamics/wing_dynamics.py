@@ -50,6 +50,7 @@ import numpy as np
 
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry
+from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_wing_mass
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.structure.rotations import expm, logm
@@ -136,15 +137,14 @@ class _StepLoad:
         x_sec0 = dyn.state.x[mesh.sections]
         self.W = dyn.section_weights(x_sec0)
         V, w = dyn.rigid_velocity()
-        r_p = np.einsum("ij,ijk->ik", self.W, x_sec0)  # rotation points
         # the reference inflow is the wing's rigid translation only: its rotation (yaw, roll, pitch rates) enters,
         # with the deformation, through the dissipative deviation damping. Taken into the reference (each
         # section's load at the inflow of V + omega x r_p, held over the step, its change spread by the moment law
         # of Eq. 9), it drives the 3 Hz yaw/twist mode: the held 0.3 m input's yaw-rate oscillation grew from
         # 0.66 to 1.22 rad/s in 0.5 s and the wing folded at 1.5 s; with it here the oscillation decays like the
         # quasi-static wing's (docs/flight_model.md, section 12)
-        self.u_ref = np.broadcast_to(V, r_p.shape).copy()
-        self.inflow = self.v_wind - self.u_ref  # "wind" of section_loads with v_kite = omega = 0
+        self.u_ref = V
+        self.inflow = self.v_wind - V  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
                                  self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
         # structural (Rayleigh) damping beta K_T(x_n) on the translations, of the motion relative to the rigid one
@@ -154,7 +154,7 @@ class _StepLoad:
             asm = wing._mono_solvers["prescribed"].asm
             _, kd = asm.assemble_data(dyn.state.x, dyn.state.Rn, tangent=True)
             self.K0_data = self.beta_K * kd * dyn.tt_mask
-            self.K0 = asm.matrix(self.K0_data).tocsr()
+            self.K0 = asm.matrix(self.K0_data)
             self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
 
     def kinematics(self, st: NodalState):
@@ -162,7 +162,7 @@ class _StepLoad:
         return a, self.v_pred + self.dt * self.dyn.alpha.gamma * a
 
     def section_deviation(self, v: np.ndarray) -> np.ndarray:
-        """``u_i = sum_j W_ij v_ij - u_ref,i`` (n_sec, 3) [m/s]."""
+        """``u_i = sum_j W_ij v_ij - u_ref`` (n_sec, 3) [m/s]."""
         return np.einsum("ij,ijk->ik", self.W, v[self.dyn.wing.mesh.sections]) - self.u_ref
 
     def _lines(self, x, v):
@@ -194,9 +194,7 @@ class _StepLoad:
         e, l, T, _ = self._lines(st.x, v)
         self.line = (T, l, e)
         f6[dyn.bridle, :3] -= T[:, None] * e
-        va = 0.5 * (v[dyn.bridle] + self.v_kcu) - self.v_wind_mid
-        van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
-        f6[dyn.bridle, :3] += 0.5 * dyn.line_drag * (l * np.linalg.norm(van, axis=1))[:, None] * van
+        f6[dyn.bridle, :3] += 0.5 * line_drag(dyn.line_drag, 0.5 * (v[dyn.bridle] + self.v_kcu) - self.v_wind_mid, e, l)
         f6[:, :3] += dyn.m_node[:, None] * self.g_K[None, :]
         self.f_phys = f.copy()
         p = dyn.alpha
@@ -347,9 +345,7 @@ class WingDynamics:
         f_int, _ = self.solver.asm.assemble(self.state.x, self.state.Rn, tangent=False)
         r = f_int - load.f_phys
         r[self.solver.auto_fixed] = 0.0
-        r6 = r.reshape(-1, 6)
-        self.a = -np.linalg.solve(self.M_blocks, r6[:, :3][:, :, None])[:, :, 0]
-        r6[:, :3] = -np.einsum("nij,nj->ni", self.M_blocks, self.a)  # M a_0 + r_0 = 0
+        self.a = -np.linalg.solve(self.M_blocks, r.reshape(-1, 6)[:, :3, None])[:, :, 0]  # M a_0 + r_0 = 0
         self.r_prev = r
 
     def rebase(self, Q: np.ndarray, p: np.ndarray) -> None:
