@@ -138,6 +138,12 @@ class DynamicsConfig:
     winch_time_constant_s: float = 0.5  # lag of the reel-out speed behind its set value [s]
     # a step whose wing solve fails is split in halves, down to dt / 2**max_substep_halvings (FlightSimulator.step)
     max_substep_halvings: int = 4  # [-]
+    # tether between ground station and KCU: "rod" = the paper's bilateral constraint |r_KCU| = l_t (Eq. 12-13; a
+    # tether that would have to push ends the flight as "slack tether"); "rope" = a unilateral constraint that only
+    # pulls: the KCU flies free inside the sphere when the tether would go slack, and its outward radial velocity
+    # is removed (an inelastic jerk) when it reaches the sphere again (dynamics/dynamic_simulator.py; the wing with
+    # inertia only)
+    tether: str = "rod"
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
     # share of Table 1's wing mass kept as the paper's four point masses at A-D; the rest is spread over the FE nodes
     # (70 % on the LE tube) and condensed onto A-D with the wing's static modes (dynamics/wing_mass.py). 1 = the
@@ -160,6 +166,11 @@ class ControlConfig:
     beta_distance_deg: float = 4.0  # blending: beta = 1/2 at this distance to the path (on the unit sphere) [deg]
     beta_min: float = 0.2  # blending: smallest weight of the path tangent [-]
     control_dt_s: float = 0.02  # controller update period [s]
+    # speed limit of the KCU's steering-line actuator: each rest length moves by at most this times control_dt_s
+    # per controller period (kite_env.control.rate_limit); 0 = none, the paper's Eq. 16-17 (default). 2 m/s is
+    # above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower (docs/flight_model.md,
+    # section 13) [m/s]
+    line_speed_max_mps: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -268,7 +279,7 @@ _NON_NEGATIVE = {
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
-    "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
+    "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.line_speed_max_mps", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
     "env.wind_speed_max_mps", "env.turbulence_intensity_max",
 }
@@ -378,6 +389,11 @@ def _validate(cfg: Config) -> None:
                           f"{cfg.sim.surrogate_start!r}")
     if cfg.dynamics.winch not in ("fixed", "force"):
         raise ConfigError(f"config key 'dynamics.winch' must be 'fixed' or 'force', got {cfg.dynamics.winch!r}")
+    if cfg.dynamics.tether not in ("rod", "rope"):
+        raise ConfigError(f"config key 'dynamics.tether' must be 'rod' or 'rope', got {cfg.dynamics.tether!r}")
+    if cfg.dynamics.tether == "rope" and not cfg.structure.dynamic:
+        raise ConfigError("config key 'dynamics.tether' = 'rope' needs structure.dynamic = true (a slack tether "
+                          "unloads the bridle, which the quasi-static wing cannot follow)")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")

@@ -37,6 +37,23 @@ import numpy as np
 from kite_env.config import ControlConfig
 
 
+# Below this tension of the power lines (F_cA + F_cC) the force ratio of Eq. 18 is not defined (an unloaded wing,
+# slack bridle lines: 0/0); the force loop then holds (error 0) instead of acting on a ratio of two noise levels.
+# Without it, a luffing wing whose power lines carry 1e-9 N while a steering line carries 1 N gave mu = 1e9 and
+# rest lengths of 1e10 m (the constant:1 flight of the wing with inertia on a rope tether, docs/flight_model.md).
+POWER_LINES_MIN_N = 100.0
+
+
+def force_ratio_error(T, mu_target: float):
+    """``(mu, mu* - mu)`` from line tensions ``T`` (..., 4) in the order A, B, C, D (Eq. 18); where the power lines
+    carry less than :data:`POWER_LINES_MIN_N` the error is 0 and mu is reported as mu*. Works on floats and arrays."""
+    T = np.asarray(T, dtype=float)
+    power = T[..., 0] + T[..., 2]
+    loaded = power >= POWER_LINES_MIN_N
+    mu = np.where(loaded, (T[..., 1] + T[..., 3]) / np.maximum(power, POWER_LINES_MIN_N), mu_target)
+    return mu, mu_target - mu
+
+
 class LineActuator:
     """Steering-line rest lengths from a desired length difference (Eq. 16-17) and the force ratio (Eq. 18-19).
 
@@ -59,24 +76,39 @@ class LineActuator:
         T = np.asarray(line_tension, dtype=float)
         return float((T[1] + T[3]) / max(T[0] + T[2], 1e-9))
 
-    def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray):
+    def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray,
+                     previous: tuple[float, float] | None = None):
         """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
 
         ``delta_l_star`` [m] is clipped to ``+-control.delta_l_max_m``; ``line_length`` and ``line_tension`` are the
         current lengths and tensions of the lines A, B, C, D. One call is one controller period
-        (``control.control_dt_s``): it advances the force loop's integral.
+        (``control.control_dt_s``): it advances the force loop's integral. ``previous``: the rest lengths of the
+        last period, from which the actuator moves at most ``control.line_speed_max_mps`` (:func:`rate_limit`).
         """
         cfg = self.cfg
         dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
         l = np.asarray(line_length, dtype=float)
         dl = float(l[1] - l[3])  # Delta l = l_B - l_D (Sect. III.A)
-        mu = self.force_ratio(line_tension)
-        self.integral = force_integral(self.integral, cfg.mu_target - mu, cfg)
-        L3 = -cfg.k3_m * (cfg.mu_target - mu) - cfg.k3i_per_s * self.integral  # Eq. (19), plus the integral term
+        mu, err = force_ratio_error(line_tension, cfg.mu_target)
+        mu, err = float(mu), float(err)
+        self.integral = force_integral(self.integral, err, cfg)
+        L3 = -cfg.k3_m * err - cfg.k3i_per_s * self.integral  # Eq. (19), plus the integral term
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
+        if previous is not None:
+            L_B, L_D = float(rate_limit(L_B, previous[0], cfg)), float(rate_limit(L_D, previous[1], cfg))
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
+
+
+def rate_limit(L, L_prev, cfg: ControlConfig):
+    """The rest length ``L`` the actuator reaches in one controller period from ``L_prev`` at its speed limit
+    ``control.line_speed_max_mps`` (0: no limit, the paper's Eq. 16-17 set the rest lengths directly); floats and
+    arrays."""
+    if cfg.line_speed_max_mps <= 0.0:
+        return L
+    step = cfg.line_speed_max_mps * cfg.control_dt_s
+    return np.clip(L, np.asarray(L_prev) - step, np.asarray(L_prev) + step)
 
 
 def force_integral(integral, error, cfg: ControlConfig):

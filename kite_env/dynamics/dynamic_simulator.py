@@ -52,8 +52,9 @@ class DynamicFlightSimulator(FlightSimulator):
         return rec
 
     # ------------------------------------------------------------------ the KCU
-    def _kcu_acceleration(self, t: float, r_k, v_k, r_b, v_b):
-        """Acceleration (3,) of the KCU on the tether and the tether's multiplier at ``t``, A-D at ``r_b``, ``v_b``."""
+    def _kcu_acceleration(self, t: float, r_k, v_k, r_b, v_b, taut: bool = True):
+        """Acceleration (3,) of the KCU on the tether and the tether's multiplier at ``t``, A-D at ``r_b``, ``v_b``;
+        ``taut=False``: the KCU flies free (a slack rope, multiplier 0)."""
         p, d = self.particles, self.cfg.dynamics
         wind = np.asarray(self.wind.velocity(t, np.vstack([r_b, r_k[None, :]])), dtype=float)
         m = p.m[KCU]
@@ -68,6 +69,8 @@ class DynamicFlightSimulator(FlightSimulator):
         f += 0.5 * line_drag(self.dyn.line_drag, 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4]), e, l).sum(axis=0)
         if d.tether_diameter_m > 0.0:
             f += tether_drag(-0.5 * p.rho * d.line_cd * d.tether_diameter_m, r_k, v_k, wind[4])
+        if not taut:
+            return f / m, 0.0
         self._set_tether(t)
         l, ld = p.tether_length, p.reel_speed
         al = self.cfg.dynamics.baumgarte_1_per_s
@@ -77,19 +80,29 @@ class DynamicFlightSimulator(FlightSimulator):
         return (f + lam * r_k) / m, lam
 
     def _kcu_step(self, t: float, dt: float, a_b):
+        """The KCU's RK4 step: ``(r, v, lam, drift, jerk)``. On a rope (``dynamics.tether``) the step is made on the
+        tether when the KCU starts on it and the tether pulls (``lam < 0``), else in free flight; a free KCU that
+        ends beyond the sphere is put back on it and loses its outward radial speed (an inelastic jerk of the
+        rope, whose impulse per step ``jerk`` [N] is returned; 0 otherwise)."""
         st = self.state
         r_b0, v_b0 = st.r[:4], st.v[:4]
+        taut = True
 
         def ends(tau):
             return r_b0 + tau * v_b0 + 0.5 * tau * tau * a_b, v_b0 + tau * a_b
 
         def rhs(tau, r, v):
             rb, vb = ends(tau)
-            a, lam = self._kcu_acceleration(t + tau, r, v, rb, vb)
+            a, lam = self._kcu_acceleration(t + tau, r, v, rb, vb, taut)
             return v, a, lam
 
         r0, v0 = st.r[KCU], st.v[KCU]
         k1v, k1a, lam = rhs(0.0, r0, v0)
+        if self.cfg.dynamics.tether == "rope":
+            on = float(np.linalg.norm(r0)) >= self.particles.tether_length * (1.0 - 1e-9)
+            if lam >= 0.0 or not on:
+                taut = False
+                k1v, k1a, lam = rhs(0.0, r0, v0)
         k2v, k2a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a)
         k3v, k3a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a)
         k4v, k4a, _ = rhs(dt, r0 + dt * k3v, v0 + dt * k3a)
@@ -100,10 +113,19 @@ class DynamicFlightSimulator(FlightSimulator):
         self._set_tether(t + dt)
         p = self.particles
         drift = float(np.linalg.norm(r)) - p.tether_length
+        jerk = 0.0
+        if not taut:
+            if drift <= 0.0:
+                return r, v, 0.0, 0.0, 0.0  # slack: inside the sphere
+            drift = 0.0
         e = r / np.linalg.norm(r)
         r = p.tether_length * e
-        v = v - (v @ e - p.reel_speed) * e
-        return r, v, lam, drift
+        dv = v @ e - p.reel_speed
+        if not taut:
+            jerk = max(dv, 0.0) * p.m[KCU] / dt
+            dv = max(dv, 0.0)
+        v = v - dv * e
+        return r, v, lam, drift, jerk
 
     # ------------------------------------------------------------------ stepping
     def _step(self, dt: float) -> StepRecord:
@@ -113,7 +135,7 @@ class DynamicFlightSimulator(FlightSimulator):
         origin, R = self._frame_now
         self._t_step = t
         b = dyn.bridle
-        r_k, v_k, lam, drift = self._kcu_step(t, dt, dyn.a[b] @ R.T)
+        r_k, v_k, lam, drift, jerk = self._kcu_step(t, dt, dyn.a[b] @ R.T)
         X = self._X_now[1] if self._X_now is not None and self._X_now[0] is st else self._flight_state(t, st)[5]
         X_loads = wing._downwashed(X)
         v_w_end = np.asarray(self.wind.velocity(t + dt, origin[None, :]), dtype=float).reshape(3)
@@ -145,7 +167,7 @@ class DynamicFlightSimulator(FlightSimulator):
         self.t = t + dt
         T, l = self.particles.line_forces(r, v)
         rec = StepRecord(t=self.t, state=new.copy(), wing=sol, R_wk=R2, v_kite=v_ke, omega=om_e, v_wind=v_we,
-                         line_tension=T, line_length=l, tether_force=float(-lam * self.tether_length),
+                         line_tension=T, line_length=l, tether_force=float(-lam * self.tether_length) + jerk,
                          constraint_drift=np.array([drift, 0.0, 0.0]))
         self.tether_length += dt * self.reel_speed
         self._winch(rec.tether_force, dt)

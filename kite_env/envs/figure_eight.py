@@ -272,7 +272,8 @@ class KiteFigureEightEnv(gym.Env):
         a = min(1.0, max(-1.0, a))
         cfg = self.cfg
         dl_star = a * cfg.control.delta_l_max_m
-        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
+        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension,
+                                                                   (self.L_B, self.L_D))
         reason = detail = None
         for _ in range(self.n_physics):
             t0 = time.perf_counter()
@@ -289,8 +290,8 @@ class KiteFigureEightEnv(gym.Env):
             if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(float(r_kcu @ r_kcu)):
                 reason = "ground"
                 break
-            if rec.tether_force < cfg.env.slack_tether_N:
-                reason = "slack tether"
+            if rec.tether_force < cfg.env.slack_tether_N and cfg.dynamics.tether == "rod":
+                reason = "slack tether"  # a rope (dynamics.tether) goes slack and flies on
                 break
         self.steps += 1
         prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied

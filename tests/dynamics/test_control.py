@@ -74,3 +74,46 @@ def test_baseline_policy_signs_and_blending():
     # a faster kite blends over a larger distance
     d = math.radians(cfg.beta_distance_deg)
     assert pol.blending(d, 40.0) > pol.blending(d, 25.0)
+
+
+def test_force_loop_holds_while_the_power_lines_are_unloaded():
+    """mu of Eq. 18 is 0/0 on an unloaded wing: the loop holds (no 1e10 m rest lengths from 1 N / 1e-9 N)."""
+    from kite_env.control import POWER_LINES_MIN_N, force_ratio_error
+
+    cfg = ControlConfig()
+    act = LineActuator(cfg, 25.2, 25.2)
+    lengths = np.array([25.1, 25.3, 25.1, 25.3])
+    for T in ([1e-9, 1.0, 0.0, 0.0], [0.4 * POWER_LINES_MIN_N, 200.0, 0.5 * POWER_LINES_MIN_N, 0.0]):
+        L_B, L_D, info = act.rest_lengths(0.0, lengths, np.array(T))
+        assert info["mu"] == cfg.mu_target and info["L3"] == 0.0 and act.integral == 0.0
+        assert L_B == pytest.approx(25.2) and L_D == pytest.approx(25.2)
+    # at the threshold it acts again, and the array form (batched env) agrees
+    T = np.array([[60.0, 30.0, 40.0, 0.0], [10.0, 30.0, 20.0, 0.0]])
+    mu, err = force_ratio_error(T, 0.3)
+    assert mu == pytest.approx([0.3, 0.3]) and err == pytest.approx([0.0, 0.0])
+    mu, err = force_ratio_error(np.array([700.0, 150.0, 300.0, 150.0]), 0.3)
+    assert float(mu) == pytest.approx(0.3) and float(err) == pytest.approx(0.0)
+    mu, _ = force_ratio_error(np.array([700.0, 50.0, 300.0, 150.0]), 0.3)
+    assert float(mu) == pytest.approx(0.2)
+
+
+def test_actuator_speed_limit():
+    """control.line_speed_max_mps bounds the rest-length change per controller period; 0 is Eq. 16-17 as printed."""
+    from kite_env.control import rate_limit
+
+    lengths = np.array([25.1, 25.2, 25.1, 25.2])
+    T = np.array([1000.0, 300.0, 1000.0, 300.0])
+    free = LineActuator(ControlConfig(line_speed_max_mps=0.0), 25.2, 25.2)
+    L_B, L_D, _ = free.rest_lengths(1.5, lengths, T, previous=(25.2, 25.2))
+    assert L_B - 25.2 == pytest.approx(3.0 * 1.5)  # K2 (dl* - dl): 4.5 m within one period
+    cfg = ControlConfig(line_speed_max_mps=2.0)
+    act = LineActuator(cfg, 25.2, 25.2)
+    prev = (25.2, 25.2)
+    for k in range(1, 4):
+        L_B, L_D, _ = act.rest_lengths(1.5, lengths, T, previous=prev)
+        assert L_B - 25.2 == pytest.approx(k * 2.0 * cfg.control_dt_s)
+        assert 25.2 - L_D == pytest.approx(k * 2.0 * cfg.control_dt_s)
+        prev = (L_B, L_D)
+    # a change within the limit passes unchanged; arrays (batched env) are limited element-wise
+    assert rate_limit(25.21, 25.2, cfg) == 25.21
+    assert rate_limit(np.array([30.0, 25.2, 20.0]), np.full(3, 25.2), cfg) == pytest.approx([25.24, 25.2, 25.16])

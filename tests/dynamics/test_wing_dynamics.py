@@ -269,3 +269,43 @@ def test_held_steering_turns_and_the_yaw_twist_oscillation_decays():
     # with the wing's inertia the same input turns the kite faster (docs/flight_model.md, section 12: 93 against 61
     # deg/s per m over the baseline flight)
     assert np.mean(w[t > 0.6]) < np.mean(w_qs[t > 0.6])
+
+
+def test_rope_tether_goes_slack_and_catches_the_kcu_again():
+    # dynamics.tether = rope: with every bridle line paid out the tether cannot pull; the KCU leaves the sphere in
+    # free flight (tether force 0) where the paper's rod would have to push; with the lines back it is caught
+    with pytest.raises(ConfigError, match="dynamics.tether"):
+        config_from_dict({"dynamics": {"tether": "rope"}})
+    with pytest.raises(ConfigError, match="dynamics.tether"):
+        config_from_dict({"dynamics": {"tether": "chain"}, "structure": {"dynamic": True}})
+    out = {}
+    for tether in ("rod", "rope"):
+        cfg = config_from_dict({"dynamics": {"tether": tether}, "structure": {"dynamic": True}})
+        sim = make_simulator(cfg, UniformWind())
+        start(sim)
+        L_B0, L_D0, rest0 = sim.L_B0, sim.L_D0, sim.particles.rest.copy()
+        sim.particles.rest[[0, 2]] += 2.0
+        recs = [sim.step(L_B0 + 2.0, L_D0 + 2.0) for _ in range(20)]
+        out[tether] = (sim, recs, L_B0, L_D0, rest0)
+    rod, rope = out["rod"][1], out["rope"][1]
+    # the rod holds the KCU on the sphere with a force below the env's slack threshold (an end of the episode)
+    assert min(r.tether_force for r in rod[-10:]) < Config().env.slack_tether_N
+    assert all(np.linalg.norm(r.state.r[4]) == pytest.approx(80.0, abs=1e-9) for r in rod)
+    F = np.array([r.tether_force for r in rope])
+    r_k = np.array([np.linalg.norm(r.state.r[4]) for r in rope])
+    l_t = out["rope"][0].cfg.dynamics.tether_length_m
+    slack = F == 0.0
+    assert slack[-10:].all() and np.all(r_k[slack] <= l_t + 1e-9) and r_k[-1] < l_t - 1e-4
+    # lines taken back at 2 m/s (the actuator's limit): the wing pulls again, the KCU is caught on the sphere and
+    # the rope carries; the catch removes the outward radial speed
+    sim, _, L_B0, L_D0, rest0 = out["rope"]
+    recs = []
+    for k in range(1, 401):
+        back = max(2.0 - 2.0 * k * sim.dt, 0.0)
+        sim.particles.rest[[0, 2]] = rest0[[0, 2]] + back
+        recs.append(sim.step(L_B0 + back, L_D0 + back))
+    F = np.array([r.tether_force for r in recs])
+    assert F[-20:].min() > 0.0  # taut (the kite lost its speed while it flew free: a weak pull)
+    for r in recs[-20:]:
+        e = r.state.r[4] / np.linalg.norm(r.state.r[4])
+        assert np.linalg.norm(r.state.r[4]) == pytest.approx(l_t, abs=1e-9) and abs(r.state.v[4] @ e) < 1e-9
