@@ -69,6 +69,7 @@ class LineActuator:
         self.L_B0 = float(L_B0)
         self.L_D0 = float(L_D0)
         self.integral = 0.0  # I = int (mu* - mu) dt [s], see the module docstring
+        self.last = (self.L_B0, self.L_D0)  # rest lengths of the last period (the actuator's speed limit)
 
     @staticmethod
     def force_ratio(line_tension: np.ndarray) -> float:
@@ -76,14 +77,13 @@ class LineActuator:
         T = np.asarray(line_tension, dtype=float)
         return float((T[1] + T[3]) / max(T[0] + T[2], 1e-9))
 
-    def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray,
-                     previous: tuple[float, float] | None = None):
+    def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray):
         """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
 
         ``delta_l_star`` [m] is clipped to ``+-control.delta_l_max_m``; ``line_length`` and ``line_tension`` are the
         current lengths and tensions of the lines A, B, C, D. One call is one controller period
-        (``control.control_dt_s``): it advances the force loop's integral. ``previous``: the rest lengths of the
-        last period, from which the actuator moves at most ``control.line_speed_max_mps`` (:func:`rate_limit`).
+        (``control.control_dt_s``): it advances the force loop's integral, and the actuator moves from the last
+        period's rest lengths at most at ``control.line_speed_max_mps`` (:func:`rate_limit`).
         """
         cfg = self.cfg
         dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
@@ -96,8 +96,8 @@ class LineActuator:
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
-        if previous is not None:
-            L_B, L_D = float(rate_limit(L_B, previous[0], cfg)), float(rate_limit(L_D, previous[1], cfg))
+        L_B, L_D = float(rate_limit(L_B, self.last[0], cfg)), float(rate_limit(L_D, self.last[1], cfg))
+        self.last = (L_B, L_D)
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
 
 

@@ -102,7 +102,7 @@ class DynamicFlightSimulator(FlightSimulator):
             on = float(np.linalg.norm(r0)) >= self.particles.tether_length * (1.0 - 1e-9)
             if lam >= 0.0 or not on:
                 taut = False
-                k1v, k1a, lam = rhs(0.0, r0, v0)
+                k1a, lam = k1a - lam * r0 / self.particles.m[KCU], 0.0  # the same forces without the tether
         k2v, k2a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k1v, v0 + 0.5 * dt * k1a)
         k3v, k3a, _ = rhs(0.5 * dt, r0 + 0.5 * dt * k2v, v0 + 0.5 * dt * k2a)
         k4v, k4a, _ = rhs(dt, r0 + dt * k3v, v0 + dt * k3a)

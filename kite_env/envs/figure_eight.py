@@ -272,8 +272,7 @@ class KiteFigureEightEnv(gym.Env):
         a = min(1.0, max(-1.0, a))
         cfg = self.cfg
         dl_star = a * cfg.control.delta_l_max_m
-        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension,
-                                                                   (self.L_B, self.L_D))
+        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
         reason = detail = None
         for _ in range(self.n_physics):
             t0 = time.perf_counter()

@@ -104,16 +104,14 @@ def test_actuator_speed_limit():
     lengths = np.array([25.1, 25.2, 25.1, 25.2])
     T = np.array([1000.0, 300.0, 1000.0, 300.0])
     free = LineActuator(ControlConfig(line_speed_max_mps=0.0), 25.2, 25.2)
-    L_B, L_D, _ = free.rest_lengths(1.5, lengths, T, previous=(25.2, 25.2))
+    L_B, L_D, _ = free.rest_lengths(1.5, lengths, T)
     assert L_B - 25.2 == pytest.approx(3.0 * 1.5)  # K2 (dl* - dl): 4.5 m within one period
     cfg = ControlConfig(line_speed_max_mps=2.0)
     act = LineActuator(cfg, 25.2, 25.2)
-    prev = (25.2, 25.2)
-    for k in range(1, 4):
-        L_B, L_D, _ = act.rest_lengths(1.5, lengths, T, previous=prev)
+    for k in range(1, 4):  # from the initial rest lengths, then from the last period's
+        L_B, L_D, _ = act.rest_lengths(1.5, lengths, T)
         assert L_B - 25.2 == pytest.approx(k * 2.0 * cfg.control_dt_s)
         assert 25.2 - L_D == pytest.approx(k * 2.0 * cfg.control_dt_s)
-        prev = (L_B, L_D)
     # a change within the limit passes unchanged; arrays (batched env) are limited element-wise
     assert rate_limit(25.21, 25.2, cfg) == 25.21
     assert rate_limit(np.array([30.0, 25.2, 20.0]), np.full(3, 25.2), cfg) == pytest.approx([25.24, 25.2, 25.16])
