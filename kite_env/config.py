@@ -224,6 +224,11 @@ class EnvConfig:
     start_curvature_max: float = float("inf")
     initial_speed_min_mps: float = 22.0  # initial speed along the path drawn from [min, max] [m/s]
     initial_speed_max_mps: float = 22.0  # [m/s]
+    # > 0 (both): the initial speed is drawn from [min, max] times the drawn wind speed instead [-] (the crosswind
+    # speed of a kite grows with the wind, ~ L/D times it: 4.4 gives the 22 m/s at 5 m/s of the fixed start and
+    # keeps a start at 10 m/s from beginning at half its flight speed, a wing that does not converge at the start)
+    initial_speed_per_wind_min: float = 0.0
+    initial_speed_per_wind_max: float = 0.0
     reset_attempts: int = 5  # draws of the start before reset() gives up (the wing must converge at the start) [-]
     # false: no draws at all, the wind section as configured (turbulence realisation wind.seed unless reset() gets
     # options={"wind_seed": n}) and the start at the crossing at sim.initial_speed_mps (kite-eval's conditions)
@@ -276,6 +281,7 @@ _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
     "structure.added_mass_factor", "structure.rayleigh_beta_s", "sim.initial_speed_per_wind",
+    "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max",
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
@@ -411,10 +417,15 @@ def _validate(cfg: Config) -> None:
     if cfg.kite.n_chord < 3:
         raise ConfigError(f"config key 'kite.n_chord' must be >= 3, got {cfg.kite.n_chord}")
     env = cfg.env
-    for lo, hi in (("wind_speed_min_mps", "wind_speed_max_mps"), ("initial_speed_min_mps", "initial_speed_max_mps")):
+    for lo, hi in (("wind_speed_min_mps", "wind_speed_max_mps"), ("initial_speed_min_mps", "initial_speed_max_mps"),
+                   ("initial_speed_per_wind_min", "initial_speed_per_wind_max")):
         if getattr(env, lo) > getattr(env, hi):
             raise ConfigError(f"config key 'env.{lo}' must not exceed 'env.{hi}', got {getattr(env, lo)} > "
                               f"{getattr(env, hi)}")
+    if (env.initial_speed_per_wind_min > 0.0) != (env.initial_speed_per_wind_max > 0.0):
+        raise ConfigError("config keys 'env.initial_speed_per_wind_min' and '_max' must both be > 0 (the start speed "
+                          "per m/s of wind) or both 0 (env.initial_speed_min_mps/_max_mps), got "
+                          f"{env.initial_speed_per_wind_min} and {env.initial_speed_per_wind_max}")
     terms = [t.strip() for t in env.observation.split(",") if t.strip()]
     bad = [t for t in terms if t not in OBSERVATION_TERMS]
     if bad or not terms or len(set(terms)) != len(terms):

@@ -219,7 +219,10 @@ class KiteFigureEightEnv(gym.Env):
                 # one uniform draw either way (2 pi u is the unbounded draw, bit for bit as uniform(0, 2 pi))
                 s0 = (self.path.parameter_of_fraction(float(rng.uniform(0.0, 1.0)), env.start_curvature_max)
                       if env.random_start else 0.0)
-                v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
+                if env.initial_speed_per_wind_max > 0.0:  # the start speed scales with the drawn wind
+                    v0 = float(rng.uniform(env.initial_speed_per_wind_min, env.initial_speed_per_wind_max)) * wind_speed
+                else:
+                    v0 = float(rng.uniform(env.initial_speed_min_mps, env.initial_speed_max_mps))
             else:  # the configured conditions (kite-eval): nothing drawn
                 wind_speed, ti = self.cfg.wind.speed_mps, self.cfg.wind.turbulence_intensity
                 wind_seed, s0, v0 = self.cfg.wind.seed, 0.0, self.cfg.start_speed_mps

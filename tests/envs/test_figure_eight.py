@@ -228,3 +228,22 @@ def test_baseline_through_the_env_flies_a_whole_figure_eight_and_beats_random_an
     assert base[1] < 5.0
     assert base[0] > rand[0] and base[0] > zero[0]
     assert base[1] < zero[1]
+
+
+def test_randomized_start_speed_can_scale_with_the_drawn_wind():
+    """``env.initial_speed_per_wind_min/_max`` > 0: the start speed is a drawn multiple of the drawn wind speed (a
+    crosswind kite's speed grows with the wind); setting only one of the two is refused."""
+    over = ["env.wind_speed_min_mps=4", "env.wind_speed_max_mps=10", "env.random_start=true",
+            "env.start_curvature_max=1.0", "env.initial_speed_per_wind_min=4.2", "env.initial_speed_per_wind_max=4.6"]
+    env = KiteFigureEightEnv(overrides=over)
+    ratios = []
+    for seed in range(3):
+        _, info = env.reset(seed=seed)
+        ratio = info["initial_speed_mps"] / info["wind_speed_mps"]
+        assert 4.2 <= ratio <= 4.6
+        ratios.append(ratio)
+        # the kite starts at the drawn speed (frame-K apparent flow aside): the KCU's speed along the path
+        assert float(np.linalg.norm(env.rec.state.v[4])) == pytest.approx(info["initial_speed_mps"], rel=1e-6)
+    assert len(set(ratios)) == 3
+    with pytest.raises(ConfigError, match="env.initial_speed_per_wind_min"):
+        KiteFigureEightEnv(overrides=["env.initial_speed_per_wind_max=4.6"])
