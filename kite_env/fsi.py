@@ -194,11 +194,23 @@ class AeroelasticWing:
         return NodalState(self.mesh.nodes.copy(), np.broadcast_to(np.eye(3), (n, 3, 3)).copy())
 
     def reset(self) -> None:
-        """Forget the warm-start state (next solve starts from the unloaded wing)."""
+        """Forget everything the previous solves left (next solve starts from the unloaded wing, as on a wing just
+        built): the warm start, the kept factorisations of the modified Newton, the tubes' secant stiffness of the
+        last state, the line tensions. Without it a cold start after another flight took a different Newton path
+        and converged elsewhere within the tolerance (a start differed with the episodes before it)."""
         self.state = self.unloaded_state()
         self._sec_prev = None
         self._step_prev = None
         self._downwash = None
+        self._free_flight = None
+        self._last_downwash_change = 0.0
+        self._C_damp = None
+        self._kb_cache = None
+        self._damped = False
+        for solver in (self.solver, self._lines_solver, *self._mono_solvers.values()):
+            solver.forget_factorization()
+        self.lines.tension[:] = 1.0
+        self._update_tube_stiffness(self.state)
 
     def _predict(self, dt: float | None) -> NodalState:
         """Start of a warm time step: the last solution, linearly extrapolated in time when the two previous

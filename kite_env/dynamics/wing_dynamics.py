@@ -334,6 +334,7 @@ class WingDynamics:
         at the start (``M a_0 = f_ext - f_int``, the rotations in equilibrium as they are)."""
         self.state = state.copy()
         self._prev = None
+        self.solver.forget_factorization()  # the kept LU of the last flight: a start must not depend on it
         self.v = np.asarray(v_nodes, float).copy()
         self.a = np.zeros_like(self.v)
         self.r_prev = np.zeros(self.wing.n_dof)

@@ -21,6 +21,13 @@ def vec():
     return KiteFigureEightVectorEnv(2, overrides=OVERRIDES)
 
 
+@pytest.fixture(scope="module")
+def vec_limited():
+    """The batch with the steering actuator's speed limit (control.line_speed_max_mps): flights that go on longer
+    than the unlimited random steering's (which leaves the envelope within a step or two)."""
+    return KiteFigureEightVectorEnv(2, overrides=[*OVERRIDES, "control.line_speed_max_mps=2"])
+
+
 def _assert_same(x, y, what):
     if isinstance(y, np.ndarray) and y.dtype != object:
         np.testing.assert_array_equal(x, y, err_msg=what)
@@ -29,11 +36,14 @@ def _assert_same(x, y, what):
         assert list(x) == list(y), what
 
 
-def test_batch_equals_single_envs_with_autoreset(vec):
+@pytest.mark.parametrize("limited", [False, True], ids=["paper_actuator", "speed_limited_actuator"])
+def test_batch_equals_single_envs_with_autoreset(request, limited):
     """Same seeds and actions: observations, rewards, terminations, truncations and info (keys, masks, values) of
     the batch are bitwise those of SyncVectorEnv over single envs, through truncations, terminations and the
     NEXT_STEP autoresets."""
-    sync = gym.vector.SyncVectorEnv([lambda: KiteFigureEightEnv(overrides=OVERRIDES, fidelity="surrogate")
+    vec = request.getfixturevalue("vec_limited" if limited else "vec")
+    over = [*OVERRIDES, "control.line_speed_max_mps=2"] if limited else OVERRIDES
+    sync = gym.vector.SyncVectorEnv([lambda: KiteFigureEightEnv(overrides=over, fidelity="surrogate")
                                      for _ in range(vec.num_envs)])
     assert vec.metadata["autoreset_mode"] == sync.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
     o1, i1 = vec.reset(seed=11)
