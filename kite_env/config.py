@@ -57,6 +57,11 @@ class StructureConfig:
     # added mass normal to the canopy: this factor times rho pi c^2 / 4 per unit span with Lissaman & Brown's
     # k_C = AR / (1 + AR) (AIAA-93-1236); 0 = none [-]
     added_mass_factor: float = 1.0
+    # rotary inertia of the wing's nodes (dynamic wing): this factor times the second moment of each node's
+    # tributary rectangle (chordwise a, spanwise b) about the node, J = m (a^2 + b^2) / 24, the mean of its two
+    # in-plane axes (lumped rotary inertia as in the HRZ lumping of Hinton, Rock & Zienkiewicz 1976, which gives a
+    # uniform beam's node m l^2 / 39); 0 = massless, quasi-static rotations [-]
+    rotary_inertia_factor: float = 0.0
     # structural damping of the wing with inertia: stiffness-proportional (Rayleigh) C = beta K_T on the nodal
     # translations, beta = 2 zeta / omega_ref: 2 % of critical at 10 Hz, the level of the paper's relative damping
     # coefficients of the wing (Table 1: 0.015-0.02); 0 = none [s]
@@ -281,6 +286,7 @@ _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
     "structure.added_mass_factor", "structure.rayleigh_beta_s", "sim.initial_speed_per_wind",
+    "structure.rotary_inertia_factor",
     "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max",
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",

@@ -8,8 +8,13 @@ the wing has mass and moves:
 * **Mass.** The lumped nodal masses of :func:`kite_env.dynamics.wing_mass.nodal_wing_mass` (Table 1's total, 70 %
   on the LE tube), of which ``dynamics.wing_point_mass_share`` sits as Table 1's point masses on A-D (the tips'
   inertia: spread by area alone, B and D get 1.7 g and the released tip diverges within 0.2 s of the start;
-  docs/flight_model.md, section 12), on the translations; the rotations are massless (quasi-static). A-D are wing
-  nodes: the partition moves to the bridle lines, the KCU and the tether stay in the particle model.
+  docs/flight_model.md, section 12), on the translations. The rotations are massless (quasi-static) by default;
+  ``structure.rotary_inertia_factor`` > 0 gives each node an isotropic rotary inertia, the factor times
+  ``m (a^2 + b^2) / 24`` of its tributary rectangle (:func:`kite_env.dynamics.wing_mass.nodal_rotary_inertia`),
+  integrated with the translations' Newmark rule on the step's spatial rotation vector. With massless rotations
+  the step's tangent keeps the static rotational stiffness, near-singular (the canopy's drilling and bending,
+  3e-4 N m/rad) and indefinite in a fold, at any step size (docs/flight_model.md, section 14).
+  A-D are wing nodes: the partition moves to the bridle lines, the KCU and the tether stay in the particle model.
 * **Added mass** of the air moved by the canopy normal to its chord: the 2-D flat plate's ``rho pi c^2 / 4`` per
   unit span (Newman, *Marine Hydrodynamics*, MIT Press 1977, Sect. 4.13, table of added masses), with
   the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
@@ -51,7 +56,7 @@ import numpy as np
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry
 from kite_env.dynamics.particles import line_drag
-from kite_env.dynamics.wing_mass import nodal_wing_mass
+from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
@@ -124,6 +129,11 @@ class _StepLoad:
         self.c_v = p.gamma / (p.beta * dt)  # d v / d x
         self.x_pred = dyn.state.x + dt * dyn.v + dt * dt * (0.5 - p.beta) * dyn.a
         self.v_pred = dyn.v + dt * (1.0 - p.gamma) * dyn.a
+        # rotations (rotary inertia): the spatial rotation vector th of each node over the step, R = exp(th) R_n,
+        # in the same Newmark form as the translations (small rotations per step)
+        self.R_n = dyn.state.Rn
+        self.th_pred = dt * dyn.w + dt * dt * (0.5 - p.beta) * dyn.aw
+        self.w_pred = dyn.w + dt * (1.0 - p.gamma) * dyn.aw
         self.r_kcu, self.v_kcu = np.asarray(r_kcu, float), np.asarray(v_kcu, float)
         self.rest, self.g_K = np.asarray(rest, float), np.asarray(g_K, float)
         self.v_wind = np.asarray(v_wind, float)
@@ -160,6 +170,12 @@ class _StepLoad:
     def kinematics(self, st: NodalState):
         a = (st.x - self.x_pred) * self.c_a
         return a, self.v_pred + self.dt * self.dyn.alpha.gamma * a
+
+    def rotation_kinematics(self, st: NodalState):
+        """Angular accelerations and velocities (n_nodes, 3) [rad/s^2, rad/s] of the iterate's rotations."""
+        th = logm(np.einsum("nij,nkj->nik", st.Rn, self.R_n))
+        aw = (th - self.th_pred) * self.c_a
+        return aw, self.w_pred + self.dt * self.dyn.alpha.gamma * aw
 
     def section_deviation(self, v: np.ndarray) -> np.ndarray:
         """``u_i = sum_j W_ij v_ij - u_ref`` (n_sec, 3) [m/s]."""
@@ -200,6 +216,10 @@ class _StepLoad:
         p = dyn.alpha
         a_m = (1.0 - p.alpha_m) * a + p.alpha_m * dyn.a
         f6[:, :3] -= np.einsum("nij,nj->ni", dyn.M_blocks, a_m) / (1.0 - p.alpha_f)
+        if dyn.has_rotary_inertia:
+            aw, _ = self.rotation_kinematics(st)
+            aw_m = (1.0 - p.alpha_m) * aw + p.alpha_m * dyn.aw
+            f6[:, 3:] -= dyn.J_node[:, None] * aw_m / (1.0 - p.alpha_f)
         f -= (p.alpha_f / (1.0 - p.alpha_f)) * dyn.r_prev
         self.f_eff = f
         return f
@@ -237,6 +257,8 @@ class _StepLoad:
         M = np.zeros(asm.nnz)
         used = dyn.used_nodes
         np.add.at(M, dyn.node_blocks[used].ravel(), dyn.M_blocks[used].ravel())
+        if dyn.has_rotary_inertia:  # d th / d spin = I for the small rotations of a step
+            M[dyn.rot_diag] += np.repeat(dyn.J_node[used], 3)
         e, l, T, dT = self._lines(st.x, v)
         ee = e[:, :, None] * e[:, None, :]
         blk = dyn.node_blocks[dyn.bridle].ravel()
@@ -278,12 +300,18 @@ class WingDynamics:
         cols = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), np.int64)
         self.node_blocks = np.asarray(idx[rows.ravel(), cols.ravel()]).ravel().astype(np.int64).reshape(n, 3, 3) - 1
         self.used_nodes = np.flatnonzero(asm._node_used)
+        # rotary inertia of the nodes (structural mass without the point masses on A-D)
+        self.J_node = cfg.structure.rotary_inertia_factor * nodal_rotary_inertia(
+            mesh, (1.0 - f) * nodal_wing_mass(mesh, cfg.dynamics))
+        self.has_rotary_inertia = bool(np.any(self.J_node > 0.0))
+        self.rot_diag = asm.diag_index[(6 * self.used_nodes[:, None] + np.arange(3, 6)[None, :]).ravel()]
         dof_r = np.repeat(np.arange(asm.n_dof), np.diff(asm.indptr))  # column of each pattern entry (CSC)
         self.tt_mask = ((asm.indices % 6 < 3) & (dof_r % 6 < 3)).astype(float)  # translation-translation entries
         if np.any(self.node_blocks[self.used_nodes] < 0):
             raise RuntimeError("the wing's tangent pattern lacks a nodal translation block")
         self.state: NodalState | None = None
         self.v = self.a = self.r_prev = None
+        self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
 
@@ -338,6 +366,8 @@ class WingDynamics:
         self.v = np.asarray(v_nodes, float).copy()
         self.a = np.zeros_like(self.v)
         self.r_prev = np.zeros(self.wing.n_dof)
+        self.w = np.zeros_like(self.v)  # (the start's load: no rotation over its "step")
+        self.aw = np.zeros_like(self.v)
         self.update_mass()
         load = _StepLoad(self, 1.0, r_kcu, v_kcu, rest, g_K, v_wind)
         load.x_pred = self.state.x  # a = 0 at the iterate, v = v_nodes
@@ -348,6 +378,12 @@ class WingDynamics:
         r[self.solver.auto_fixed] = 0.0
         self.a = -np.linalg.solve(self.M_blocks, r.reshape(-1, 6)[:, :3, None])[:, :, 0]  # M a_0 + r_0 = 0
         self.r_prev = r
+        # rotations: the wing turns rigidly at the start, with the angular accelerations of M a_0 + r_0 = 0
+        _, w = self.rigid_velocity()
+        self.w = np.repeat(w[None, :], len(self.v), axis=0)
+        J = self.J_node
+        ok = J > 0.0
+        self.aw[ok] = -r.reshape(-1, 6)[ok, 3:] / J[ok, None]
 
     def rebase(self, Q: np.ndarray, p: np.ndarray) -> None:
         """Re-express the state in a new frame: ``x' = Q x + p``, vectors ``Q v``, rotations ``Q R``."""
@@ -355,6 +391,8 @@ class WingDynamics:
         self.state = NodalState(st.x @ Q.T + p, Q @ st.Rn)
         self.v = self.v @ Q.T
         self.a = self.a @ Q.T
+        self.w = self.w @ Q.T
+        self.aw = self.aw @ Q.T
         r6 = self.r_prev.reshape(-1, 2, 3) @ Q.T
         self.r_prev = r6.reshape(-1)
         self.wing.state = self.state
@@ -392,6 +430,7 @@ class WingDynamics:
         if res.accepted:
             load.force(st)
         a, v = load.kinematics(st)
+        aw, w = load.rotation_kinematics(st) if self.has_rotary_inertia else (self.aw, self.w)
         r = res.reactions + (load.f_eff - load.f_phys)
         r[self.solver.auto_fixed] = 0.0
         history.append({"iter": len(history) + 1, "newton_iters": res.iterations, "residual_N": res.history[-1][1],
@@ -399,6 +438,7 @@ class WingDynamics:
                         "factorizations": res.factorizations, "accepted": res.accepted, "method": "dynamic"})
         self._prev = (self.state, dt)
         self.state, self.v, self.a, self.r_prev = st, v, a, r
+        self.w, self.aw = w, aw
         wing.state = st
         T, _, e = load.line
         wing._free_flight = flight
@@ -438,5 +478,7 @@ class WingDynamics:
         return vc - np.cross(w, c), w
 
     def kinetic_energy(self) -> float:
-        """``1/2 sum v . M v`` [J] with the current mass blocks (structural and added mass)."""
-        return 0.5 * float(np.einsum("ni,nij,nj->", self.v, self.M_blocks, self.v))
+        """``1/2 sum v . M v + 1/2 sum J |w|^2`` [J] with the current mass blocks (structural and added mass) and the
+        nodes' rotary inertia."""
+        return 0.5 * float(np.einsum("ni,nij,nj->", self.v, self.M_blocks, self.v)) \
+            + 0.5 * float(np.einsum("n,ni,ni->", self.J_node, self.w, self.w))

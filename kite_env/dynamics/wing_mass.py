@@ -62,6 +62,24 @@ def nodal_wing_mass(mesh, cfg: DynamicsConfig) -> np.ndarray:
     return m
 
 
+def nodal_rotary_inertia(mesh, node_mass: np.ndarray) -> np.ndarray:
+    """Isotropic rotary inertia of every FE node (n_nodes,) [kg m^2]: ``J = m (a^2 + b^2) / 24`` of its mass ``m``
+    spread over its tributary rectangle, ``a`` its chordwise tributary length and ``b`` its section's width (the
+    mean of the rectangle's two in-plane second moments ``m a^2 / 12`` and ``m b^2 / 12``; lumped rotary inertia as
+    in Hinton, Rock & Zienkiewicz, Earthquake Eng. Struct. Dyn. 4, 245, 1976). A node outside the sections gets 0.
+    """
+    sec = mesh.sections
+    x = mesh.nodes[sec]
+    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
+    trib = np.zeros(sec.shape)
+    trib[:, :-1] += 0.5 * seg
+    trib[:, 1:] += 0.5 * seg
+    b = np.broadcast_to(np.asarray(mesh.section_width, dtype=float)[:, None], sec.shape)
+    J = np.zeros(mesh.n_nodes)
+    np.add.at(J, sec.ravel(), (np.asarray(node_mass)[sec] * (trib**2 + b**2) / 24.0).ravel())
+    return J
+
+
 def condensed_wing_mass(wing, node_mass: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray:
     """Guyan-condensed mass matrix of the wing on A-D (12, 12) [kg], frame K (A, B, C, D x, y, z).
 
