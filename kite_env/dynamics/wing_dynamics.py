@@ -285,7 +285,8 @@ class WingDynamics:
         self.bridle = np.asarray(mesh.bridle)
         # dynamics.wing_point_mass_share of Table 1's masses as the paper's point masses on A-D, the rest spread
         f = cfg.dynamics.wing_point_mass_share
-        self.m_node = (1.0 - f) * nodal_wing_mass(mesh, cfg.dynamics)
+        m_spread = (1.0 - f) * nodal_wing_mass(mesh, cfg.dynamics)
+        self.m_node = m_spread.copy()
         self.m_node[self.bridle] += f * np.array([cfg.dynamics.mass_le_kg, cfg.dynamics.mass_te_kg,
                                                   cfg.dynamics.mass_le_kg, cfg.dynamics.mass_te_kg])
         d = cfg.dynamics
@@ -301,8 +302,7 @@ class WingDynamics:
         self.node_blocks = np.asarray(idx[rows.ravel(), cols.ravel()]).ravel().astype(np.int64).reshape(n, 3, 3) - 1
         self.used_nodes = np.flatnonzero(asm._node_used)
         # rotary inertia of the nodes (structural mass without the point masses on A-D)
-        self.J_node = cfg.structure.rotary_inertia_factor * nodal_rotary_inertia(
-            mesh, (1.0 - f) * nodal_wing_mass(mesh, cfg.dynamics))
+        self.J_node = cfg.structure.rotary_inertia_factor * nodal_rotary_inertia(mesh, m_spread)
         self.has_rotary_inertia = bool(np.any(self.J_node > 0.0))
         self.rot_diag = asm.diag_index[(6 * self.used_nodes[:, None] + np.arange(3, 6)[None, :]).ravel()]
         dof_r = np.repeat(np.arange(asm.n_dof), np.diff(asm.indptr))  # column of each pattern entry (CSC)

@@ -35,6 +35,15 @@ import numpy as np
 from kite_env.config import DynamicsConfig
 
 
+def chordwise_tributary(mesh) -> np.ndarray:
+    """Chordwise tributary length of every section node (n_sec, m) [m]: half of each adjacent node distance."""
+    seg = np.linalg.norm(np.diff(mesh.nodes[mesh.sections], axis=1), axis=2)  # (n_sec, m - 1)
+    trib = np.zeros(mesh.sections.shape)
+    trib[:, :-1] += 0.5 * seg
+    trib[:, 1:] += 0.5 * seg
+    return trib
+
+
 def nodal_wing_mass(mesh, cfg: DynamicsConfig) -> np.ndarray:
     """Translational mass of every FE node (n_nodes,) [kg]: Table 1's total ``2 (m_A + m_B)`` with the LE share
     ``m_A / (m_A + m_B)`` on the LE-tube nodes (by strip width) and the rest on the canopy (by tributary area).
@@ -49,13 +58,8 @@ def nodal_wing_mass(mesh, cfg: DynamicsConfig) -> np.ndarray:
     total = 2.0 * (cfg.mass_le_kg + cfg.mass_te_kg)
     le_share = cfg.mass_le_kg / (cfg.mass_le_kg + cfg.mass_te_kg)
     sec = mesh.sections
-    x = mesh.nodes[sec]
     w = np.asarray(mesh.section_width, dtype=float)
-    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)  # (n_sec, m - 1) chordwise node distances
-    trib = np.zeros(sec.shape)
-    trib[:, :-1] += 0.5 * seg
-    trib[:, 1:] += 0.5 * seg
-    area = w[:, None] * trib
+    area = w[:, None] * chordwise_tributary(mesh)
     m = np.zeros(mesh.n_nodes)
     np.add.at(m, sec[:, 0], le_share * total * w / w.sum())
     np.add.at(m, sec.ravel(), ((1.0 - le_share) * total * area / area.sum()).ravel())
@@ -69,11 +73,7 @@ def nodal_rotary_inertia(mesh, node_mass: np.ndarray) -> np.ndarray:
     in Hinton, Rock & Zienkiewicz, Earthquake Eng. Struct. Dyn. 4, 245, 1976). A node outside the sections gets 0.
     """
     sec = mesh.sections
-    x = mesh.nodes[sec]
-    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
-    trib = np.zeros(sec.shape)
-    trib[:, :-1] += 0.5 * seg
-    trib[:, 1:] += 0.5 * seg
+    trib = chordwise_tributary(mesh)
     b = np.broadcast_to(np.asarray(mesh.section_width, dtype=float)[:, None], sec.shape)
     J = np.zeros(mesh.n_nodes)
     np.add.at(J, sec.ravel(), (np.asarray(node_mass)[sec] * (trib**2 + b**2) / 24.0).ravel())
