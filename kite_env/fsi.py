@@ -257,28 +257,56 @@ class AeroelasticWing:
         return np.array([x, 0.0, a[2] - h])
 
     # ------------------------------------------------------------------ pieces of the coupling loop
-    def _update_tube_stiffness(self, state: NodalState) -> np.ndarray:
-        """Secant EI(p, d, kappa) and GJ(p, d, phi) of the tubes from the current element deformation.
+    def _update_tube_stiffness(self, state: NodalState, material_tangent: bool = True) -> np.ndarray:
+        """Secant EI(p, d, kappa) and GJ(p, d, phi) of the tubes from the current element deformation, with the
+        material terms of the law's tangent when the law is evaluated at every iterate (``material_tangent``; False
+        where the stiffness is held over a Newton solve, as in the partitioned coupling: the law is linear there).
 
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
         p = self.tube_props
         l, th = self.beams.local_rotations(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
+        measure = self.cfg.structure.tube_curvature
+        # the energy's curvature is per unloaded length; the larger-end law keeps its current chord length (stops
+        # before 27: the default flight unchanged)
+        L_k = self.beams.L0 if measure == "element_energy" else l
         if self.beams.backend == "numba":  # the same formulas in one compiled loop (tested against the lines below)
             n_t = self._tube_rows.size
-            EI, GJ, col = np.empty(n_t), np.empty(n_t), np.empty(n_t, dtype=np.bool_)
-            tube_secants(th, l, self._tube_rows, p.EI0, p.M_max, p.kappa_collapse, p.GJ0, p.c2, EI, GJ, col)
+            EI, GJ, gb, gt = (np.empty(n_t) for _ in range(4))
+            col = np.empty(n_t, dtype=np.bool_)
+            tube_secants(th, L_k, self._tube_rows, p.EI0, p.M_max, p.kappa_collapse, p.GJ0, p.c2,
+                         measure == "element_energy", material_tangent, EI, GJ, col, gb, gt)
         else:
-            th1, th2, L = th[tb, 0], th[tb, 1], l[tb][:, None]
-            # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs the secant
-            kappa = np.maximum(np.linalg.norm(-(4 * th1[:, 1:] + 2 * th2[:, 1:]) / L, axis=1),
-                               np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L, axis=1))
-            phi = np.abs(th2[:, 0] - th1[:, 0]) / L[:, 0]
+            th1, th2, L0 = th[tb, 0], th[tb, 1], L_k[tb]
+            kappa = tube.element_curvature(th1, th2, L0, measure)
+            phi = np.abs(th2[:, 0] - th1[:, 0]) / L0
             EI, GJ, col = tube.secant_EI(p, kappa), tube.secant_GJ(p, phi), tube.collapsed(p, kappa)
-        self.beams.set_bending_torsion(self._tube_rows, EI, GJ)
+            # the consistent tangent exists for the energy-derived law only
+            gb, gt = (tube.secant_material_terms(p, kappa, phi, L0) if measure == "element_energy" and material_tangent
+                      else (None, None))
+        self.beams.set_bending_torsion(self._tube_rows, EI, GJ, gb, gt)
         collapsed = np.zeros(len(self.mesh.beams), bool)
         collapsed[tb] = col
         return collapsed
+
+    def strain_energy(self, state: NodalState) -> float:
+        """Stored elastic energy [J] of the wing at ``state``: the canopy shells, the tip rods and trailing-edge
+        wire, and the inflated tubes with Breukels' law as the energy ``L0 (W(kappa) + W_t(phi))`` of
+        :mod:`kite_env.structure.tube` (``structure.tube_curvature = "element_energy"``; the ``max_end`` law has no
+        stored energy, ValueError)."""
+        if self.cfg.structure.tube_curvature != "element_energy":
+            raise ValueError("strain_energy: the tube law with structure.tube_curvature='max_end' is not derived "
+                             "from an energy")
+        b, m, tb = self.beams, self.mesh, self._is_tube
+        xb, Rb = state.x[m.beams], state.Rn[m.beams]
+        l, th = b.local_rotations(xb, Rb)
+        L0 = b.L0[tb]
+        kappa = tube.element_curvature(th[tb, 0], th[tb, 1], L0)
+        phi = np.abs(th[tb, 1, 0] - th[tb, 0, 0]) / L0
+        u_tube = L0 * (tube.bending_energy_density(self.tube_props, kappa)
+                       + tube.torsion_energy_density(self.tube_props, phi)) + 0.5 * b.EA[tb] / L0 * (l[tb] - L0) ** 2
+        u_rest = b.energy(xb, Rb)[~tb]
+        return float(u_tube.sum() + u_rest.sum() + self.shells.energy(state.x[m.shells], state.Rn[m.shells]).sum())
 
     #: points (/chord) the regression CM is stepped through from a cold start (``_cm_continuation``)
     CM_CONTINUATION_START = 0.25
@@ -588,7 +616,7 @@ class AeroelasticWing:
                 self.lines.tension[:] = max(np.linalg.norm(f_ext.reshape(-1, 6)[:, :3].sum(axis=0)) / 4.0, 1.0)
             fnorm = np.linalg.norm(f_aero)
             dload = np.inf if f_prev is None else np.linalg.norm(f_aero - f_prev) / max(fnorm, 1e-12)
-            collapsed = self._update_tube_stiffness(state)
+            collapsed = self._update_tube_stiffness(state, material_tangent=False)
             try:
                 # inexact inner solve: a few Newton steps per load update (the loads are relaxed and updated
                 # anyway); the coupling only ends on an inner solve that converged to the Newton tolerance
@@ -717,7 +745,14 @@ class _AeroLoad:
         self.n_tangent = 0
 
     def force(self, state: NodalState) -> np.ndarray:
-        self.collapsed = self.wing._update_tube_stiffness(state)
+        # the tubes' exact tangent (structure.tube_curvature = element_energy) in time steps (warm starts, small
+        # increments: quadratic convergence, 1.79 instead of 1.97 Newton iterations per step over the quasi-static
+        # baseline); a cold static solve keeps the secant stiffness alone, Kachanov's secant iteration, which
+        # converges from far for a monotone law (Kachanov, J. Appl. Math. Mech. 23, 880, 1959; Fucik, Kratochvil &
+        # Necas, Comment. Math. Univ. Carolinae 14, 651, 1973): with the exact, nearly singular tangent of saturating
+        # tubes a randomized start at 9 m/s (seed 100 of scripts/end_reasons.py) failed that converges with the
+        # secant
+        self.collapsed = self.wing._update_tube_stiffness(state, material_tangent=bool(self.dt))
         self.loads = self.wing._aero(state, self.flight, self.dt)
         self.n_force += 1
         self.f_ext = self.wing._load_vector(self.loads, self.scale)

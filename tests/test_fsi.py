@@ -197,21 +197,23 @@ def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
     loaded = wing.state.copy()
     bent = wing.state.copy()
     bent.Rn[:] = expm(0.3 * np.random.default_rng(2).normal(size=bent.x.shape)) @ bent.Rn
-    saved = (beams.EI2.copy(), beams.EI3.copy(), beams.GJ.copy(), beams._k11.copy(), beams._k12.copy())
+    saved = (beams.EI2.copy(), beams.EI3.copy(), beams.GJ.copy(), beams._k11.copy(), beams._k12.copy(),
+             beams._kmat.copy())
     try:
         for state in (loaded, bent):
             out = {}
             for backend in ("numba", "numpy"):
                 beams.backend = backend
                 collapsed = wing._update_tube_stiffness(state)
-                out[backend] = (beams.EI2.copy(), beams.GJ.copy(), collapsed)
+                out[backend] = (beams.EI2.copy(), beams.GJ.copy(), collapsed, beams._kmat.copy())
             np.testing.assert_allclose(out["numba"][0], out["numpy"][0], rtol=1e-12)
             np.testing.assert_allclose(out["numba"][1], out["numpy"][1], rtol=1e-12)
             np.testing.assert_array_equal(out["numba"][2], out["numpy"][2])
+            np.testing.assert_allclose(out["numba"][3], out["numpy"][3], rtol=1e-9, atol=1e-300)
         assert np.any(out["numba"][2]) and np.min(out["numba"][0][wing._tube_rows] / wing.tube_props.EI0) < 0.5
     finally:
         beams.backend = "numba"
-        beams.EI2[:], beams.EI3[:], beams.GJ[:], beams._k11[:], beams._k12[:] = saved
+        beams.EI2[:], beams.EI3[:], beams.GJ[:], beams._k11[:], beams._k12[:], beams._kmat[:] = saved
 
 
 def test_induced_drag_turns_the_lift_back_by_the_lifting_line_angle():
@@ -234,3 +236,25 @@ def test_induced_drag_turns_the_lift_back_by_the_lifting_line_angle():
     assert 3.3 < w1.aspect_ratio < 3.7 and 0.9 < w1.span_efficiency < 1.0
     assert s1.drag - s0.drag == pytest.approx(alpha_i * s1.lift, rel=0.15)
     assert s1.lift / s1.drag < 0.5 * s0.lift / s0.drag
+
+
+def test_tube_tangent_is_exact_in_time_steps_and_the_secant_in_cold_solves(nominal):
+    """The tubes' material tangent terms (structure.tube_curvature = element_energy) enter the Newton matrix of a
+    time step (warm, small increments); a cold static solve iterates on the secant stiffness alone (Kachanov's
+    secant iteration: a randomized 9 m/s start failed with the exact tangent of saturating tubes)."""
+    from kite_env.fsi import _AeroLoad
+
+    _, flight, _, state = nominal
+    base = Config()
+    for measure in ("element_energy", "max_end"):
+        wing = AeroelasticWing(build_kite("rhino16"), dataclasses.replace(
+            base, structure=dataclasses.replace(base.structure, tube_curvature=measure)))
+        tb = wing._tube_rows
+        asm = wing._mono_solvers["prescribed"].asm
+        _AeroLoad(wing, asm, flight, None, 1.0).force(state)
+        assert np.all(wing.beams._kmat[tb] == 0.0)
+        _AeroLoad(wing, asm, flight, 0.005, 1.0).force(state)
+        if measure == "element_energy":
+            assert np.all(wing.beams._kmat[tb, 0] < 0.0)  # a loaded tube softens: g_b < 0 on every element
+        else:  # the larger-end law has no consistent tangent
+            assert np.all(wing.beams._kmat[tb] == 0.0)

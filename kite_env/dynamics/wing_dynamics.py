@@ -59,6 +59,7 @@ from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.structure.rotations import expm, logm
+from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
 
 #: width of the smoothed pull-only law of the bridle lines [N] (:func:`line_tension`)
@@ -142,6 +143,8 @@ class _StepLoad:
         self.loads = self.collapsed = None
         self.f_phys = self.f_eff = None
         self.line = None
+        # the canopy's membrane forces of the step start (energy-consistent membrane forces, dyn.membrane_forces)
+        self.f_m0 = dyn.membrane_force(dyn.state.x) if dyn.energy_consistent_membrane else None
         # held over the step: the sampling weights, the rigid-body inflow and the section damping at the start
         wing, mesh = dyn.wing, dyn.wing.mesh
         x_sec0 = dyn.state.x[mesh.sections]
@@ -221,6 +224,11 @@ class _StepLoad:
             aw_m = (1.0 - p.alpha_m) * aw + p.alpha_m * dyn.aw
             f6[:, 3:] -= dyn.J_node[:, None] * aw_m / (1.0 - p.alpha_f)
         f -= (p.alpha_f / (1.0 - p.alpha_f)) * dyn.r_prev
+        if self.f_m0 is not None:
+            # the membrane's averaged force (1 - alpha_f) f_m(x_n+1) + alpha_f f_m(x_n) of the equation above becomes
+            # the discrete gradient f_alg(x_n, x_n+1), whose work is the change of the stored energy
+            f += dyn.membrane_force(st.x) + (p.alpha_f / (1.0 - p.alpha_f)) * self.f_m0 \
+                    - dyn.membrane_force(st.x, x0=dyn.state.x) / (1.0 - p.alpha_f)
         self.f_eff = f
         return f
 
@@ -234,6 +242,8 @@ class _StepLoad:
         c_m = (1.0 - p.alpha_m) / ((1.0 - p.alpha_f) * p.beta * self.dt * self.dt)
         K, C, M = self.operators(st)
         self.n_tangent += 1
+        if self.f_m0 is not None:
+            K = K + self.dyn.membrane_tangent_correction(st.x, self.dyn.state.x)
         return K + self.c_v * C + c_m * M
 
     def operators(self, st: NodalState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -314,6 +324,37 @@ class WingDynamics:
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
+        self.energy_consistent_membrane = cfg.structure.membrane_forces == "energy_consistent"
+        sh = wing.shells
+        self._shell_dofs = (6 * sh.conn[:, :, None] + np.arange(3)[None, None, :]).reshape(-1)
+        self._shell_map = asm._set_maps[[i for i, es in enumerate(asm.sets) if es is sh][0]].reshape(-1, 18, 18)
+        tr = (6 * np.arange(3)[:, None] + np.arange(3)[None, :]).ravel()  # translations of the element's 18 DOF
+        self._shell_tt = self._shell_map[:, tr][:, :, tr]  # (n, 9, 9) pattern positions of the membrane's blocks
+
+    def membrane_force(self, x: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """The canopy's membrane forces (n_dof,) [N] on the translations: at the positions ``x`` (n_nodes, 3) or,
+        with ``x0``, the energy-consistent force of the step from ``x0`` to ``x``
+        (:func:`kite_env.structure.shell_membrane.membrane_discrete_gradient`)."""
+        sh = self.wing.shells
+        if x0 is None:
+            fe = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.wrinkling)[1]
+        else:
+            fe = membrane_discrete_gradient(x0[sh.conn], x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack,
+                                            sh.wrinkling)[0]
+        return np.bincount(self._shell_dofs, weights=fe.ravel(), minlength=self.wing.n_dof)
+
+    def membrane_tangent_correction(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        """Pattern data of ``K_alg / (1 - alpha_f) - K_m(x)``: the derivative of the energy-consistent membrane
+        force of the step (:meth:`membrane_force` with ``x0``) in the step's equation, less the membrane tangent at
+        ``x`` that the structure's assembly already holds. Without it the modified Newton iteration stalls where
+        the membrane's state (taut, wrinkled, slack) differs between the step's end and its midpoint."""
+        sh = self.wing.shells
+        K1 = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.wrinkling)[2]
+        Ka = membrane_discrete_gradient(x0[sh.conn], x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack,
+                                        sh.wrinkling, tangent=True)[3]
+        dK = Ka / (1.0 - self.alpha.alpha_f) - K1
+        return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.wing._mono_solvers[
+            "prescribed"].asm.nnz)
 
     # ------------------------------------------------------------------ pieces
     def section_weights(self, x_sec: np.ndarray) -> np.ndarray:

@@ -153,10 +153,16 @@ class BeamSet:
         # diagonal local stiffness blocks (element frame), K_l[theta_i, theta_j] = diag(k_ij)
         self._k11 = np.stack([self.GJ, 4.0 * self.EI2, 4.0 * self.EI3], axis=-1) / L0[:, None]
         self._k12 = np.stack([-self.GJ, 2.0 * self.EI2, 2.0 * self.EI3], axis=-1) / L0[:, None]
+        # rank-one material terms of a nonlinear moment law (set_bending_torsion): dm/dtheta = K_l + g m m^T
+        self._kmat = np.zeros((n_e, 2))
 
-    def set_bending_torsion(self, rows: np.ndarray, EI: np.ndarray, GJ: np.ndarray) -> None:
+    def set_bending_torsion(self, rows: np.ndarray, EI: np.ndarray, GJ: np.ndarray, g_bend=None, g_twist=None) -> None:
         """Fast in-place update of ``EI2 = EI3 = EI`` and ``GJ`` for the beams ``rows`` (index array), for a
-        stiffness law evaluated every iteration (inflated tubes); values must be finite and >= 0 (not checked)."""
+        stiffness law evaluated every iteration (inflated tubes); values must be finite and >= 0 (not checked).
+
+        ``g_bend``, ``g_twist`` (len(rows),) [1/(N m)]: the material part of the tangent of a secant law whose
+        stiffness depends on the deformation, ``dm/dtheta = K_l + g m m^T`` over the bending (y, z of both ends) and
+        the twist components of the local moments ``m``; None = 0 (the secant alone)."""
         self.EI2[rows] = EI
         self.EI3[rows] = EI
         self.GJ[rows] = GJ
@@ -165,6 +171,8 @@ class BeamSet:
         self._k11[rows, 1] = self._k11[rows, 2] = 4.0 * EI * iL
         self._k12[rows, 0] = -GJ * iL
         self._k12[rows, 1] = self._k12[rows, 2] = 2.0 * EI * iL
+        self._kmat[rows, 0] = 0.0 if g_bend is None else g_bend
+        self._kmat[rows, 1] = 0.0 if g_twist is None else g_twist
 
     # ------------------------------------------------------------------------------------------ kinematics
     def _frame(self, x_e, R_e):
@@ -266,7 +274,8 @@ class BeamSet:
                              f"got {x_e.shape} and {R_e.shape}")
         f = np.empty((n, 12))
         K = np.empty((n, 12, 12) if tangent else (1, 12, 12))
-        beam_internal(x_e, R_e, self.R0, self.L0, self.EA, self._k11, self._k12, f, K, np.empty(n), bool(tangent))
+        beam_internal(x_e, R_e, self.R0, self.L0, self.EA, self._k11, self._k12, self._kmat, f, K, np.empty(n),
+                      bool(tangent))
         return f, (K if tangent else None)
 
     def _internal_numpy(self, x_e, R_e):
@@ -305,6 +314,11 @@ class BeamSet:
         KlB = np.empty_like(Bth)
         KlB[:, 0] = self._k11[:, :, None] * Bth[:, 0] + self._k12[:, :, None] * Bth[:, 1]
         KlB[:, 1] = self._k12[:, :, None] * Bth[:, 0] + self._k11[:, :, None] * Bth[:, 1]
+        # material terms of a nonlinear moment law: (dm/dtheta) B = K_l B + g m (m^T B) (bending y, z; twist x)
+        sb = np.einsum("nka,nkaj->nj", m[:, :, 1:], Bth[:, :, 1:])
+        st = np.einsum("nk,nkj->nj", m[:, :, 0], Bth[:, :, 0])
+        KlB[:, :, 1:] += self._kmat[:, 0, None, None, None] * m[:, :, 1:, None] * sb[:, None, None, :]
+        KlB[:, :, 0] += self._kmat[:, 1, None, None] * m[:, :, 0, None] * st[:, None, :]
         Y = np.einsum("nkba,nkbj->nkaj", Tinv, KlB) + np.einsum("nkab,nkbj->nkaj", _dTinvT_m(th, m), Bth)
         Z = np.einsum("nab,nkbj->nkaj", Rr, Y) - np.einsum("nkab,nbj->nkaj", skew(Mi), W)
         K = np.einsum("nkai,nkaj->nij", E, Z)

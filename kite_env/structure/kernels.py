@@ -227,28 +227,52 @@ def beam_local_rotations(x_e, R_e, R0, l_out, th_out):
                 Rb[0, 0], Rb[0, 1], Rb[0, 2], Rb[1, 0], Rb[1, 1], Rb[1, 2], Rb[2, 0], Rb[2, 1], Rb[2, 2])
 
 
+#: below this normalised curvature / twist the material tangent terms of the secant law are 0 (m = 0 there)
+_SECANT_TINY = 1e-12
+
+
 @njit(**_JIT)
-def tube_secants(th, l, rows, EI0, M_max, kappa_collapse, GJ0, c2, EI_out, GJ_out, collapsed_out):
+def tube_secants(th, L0, rows, EI0, M_max, kappa_collapse, GJ0, c2, energy, with_tangent, EI_out, GJ_out,
+                 collapsed_out, gb_out, gt_out):
     """Breukels' secant tube stiffnesses from the local end rotations (``AeroelasticWing._update_tube_stiffness``).
 
-    th : (n_beams, 2, 3) float [rad], l : (n_beams,) float [m]   local end rotations and chord lengths
-    (:func:`beam_local_rotations`); rows : (n_tube,) int   the tube beams; EI0, M_max, kappa_collapse, GJ0, c2 :
-    (n_tube,) float   :class:`kite_env.structure.tube.TubeProperties`. Outputs (n_tube,): secant ``EI = M(kappa) /
-    kappa`` [N m^2] with the larger end curvature of the cubic element, ``|-(4 th1 + 2 th2)| / L`` and
-    ``|(2 th1 + 4 th2)| / L`` over the bending components, secant ``GJ = T(phi) / phi`` with the twist per length
-    ``phi = |th2_x - th1_x| / L`` (tube.secant_EI, tube.secant_GJ) and the collapse flag ``kappa > kappa_collapse``.
+    th : (n_beams, 2, 3) float [rad], L0 : (n_beams,) float [m]   local end rotations (:func:`beam_local_rotations`)
+    and the lengths the curvatures are per (unloaded for ``energy``, the current chord for the larger-end law); rows : (n_tube,) int   the tube beams; EI0, M_max, kappa_collapse, GJ0, c2 : (n_tube,)
+    float   :class:`kite_env.structure.tube.TubeProperties`; energy : bool   the curvature measure, True: the
+    element's root-mean-square curvature ``sqrt(4 (th1^2 + th1 th2 + th2^2)) / L0`` over both bending components
+    (the secant law is then the gradient of an energy), False: the larger end curvature of the cubic element,
+    ``|-(4 th1 + 2 th2)| / L0`` and ``|(2 th1 + 4 th2)| / L0``. Outputs (n_tube,): secant ``EI = M(kappa) / kappa``
+    [N m^2], secant ``GJ = T(phi) / phi`` with the twist per length ``phi = |th2_x - th1_x| / L0`` (tube.secant_EI,
+    tube.secant_GJ) and the collapse flag ``kappa > kappa_collapse``; with ``energy`` and ``with_tangent`` the
+    material tangent terms ``gb_out``, ``gt_out`` (tube.secant_material_terms; else 0: ``max_end`` has no consistent
+    tangent, and a stiffness held over a Newton solve is a linear law there).
     """
     for k in range(rows.shape[0]):
         e = rows[k]
-        L = l[e]
-        a1, a2 = -(4.0 * th[e, 0, 1] + 2.0 * th[e, 1, 1]) / L, -(4.0 * th[e, 0, 2] + 2.0 * th[e, 1, 2]) / L
-        b1, b2 = (2.0 * th[e, 0, 1] + 4.0 * th[e, 1, 1]) / L, (2.0 * th[e, 0, 2] + 4.0 * th[e, 1, 2]) / L
-        kappa = max(math.sqrt(a1 * a1 + a2 * a2), math.sqrt(b1 * b1 + b2 * b2))
+        L = L0[e]
+        if energy:
+            s = 0.0
+            for j in (1, 2):
+                s += th[e, 0, j] * th[e, 0, j] + th[e, 0, j] * th[e, 1, j] + th[e, 1, j] * th[e, 1, j]
+            kappa = 2.0 * math.sqrt(s) / L
+        else:
+            a1, a2 = -(4.0 * th[e, 0, 1] + 2.0 * th[e, 1, 1]) / L, -(4.0 * th[e, 0, 2] + 2.0 * th[e, 1, 2]) / L
+            b1, b2 = (2.0 * th[e, 0, 1] + 4.0 * th[e, 1, 1]) / L, (2.0 * th[e, 0, 2] + 4.0 * th[e, 1, 2]) / L
+            kappa = max(math.sqrt(a1 * a1 + a2 * a2), math.sqrt(b1 * b1 + b2 * b2))
         x = EI0[k] * kappa / M_max[k]
         EI_out[k] = EI0[k] * ((1.0 - 0.5 * x) if x < 1e-6 else -math.expm1(-x) / x)
         y = c2[k] * abs(th[e, 1, 0] - th[e, 0, 0]) / L
         GJ_out[k] = GJ0[k] * ((1.0 - y * y / 3.0) if y < 1e-6 else math.atan(y) / y)
         collapsed_out[k] = abs(kappa) > kappa_collapse[k]
+        gb_out[k], gt_out[k] = 0.0, 0.0
+        if energy and with_tangent:
+            if x > _SECANT_TINY:  # (EI_t - EI_s) / EI0 = exp(-x) - (1 - exp(-x)) / x, its series for small x
+                dd = (-0.5 * x + x * x / 3.0 - x * x * x / 8.0) if x < 1e-4 else math.exp(-x) + math.expm1(-x) / x
+                gb_out[k] = EI0[k] * dd / (kappa * kappa * L * EI_out[k] * EI_out[k])
+            if y > _SECANT_TINY:  # (GJ_t - GJ_s) / GJ0 = 1 / (1 + y^2) - atan(y) / y
+                dd = (-2.0 * y * y / 3.0 + 4.0 * y ** 4 / 5.0) if y < 1e-4 else 1.0 / (1.0 + y * y) - math.atan(y) / y
+                phi = y / c2[k]
+                gt_out[k] = GJ0[k] * dd / (phi * phi * L * GJ_out[k] * GJ_out[k])
 
 
 @njit(**_JIT)
@@ -289,7 +313,7 @@ def scatter_add(out, index, values):
 
 
 @njit(**_JIT)
-def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out, want_K=True):
+def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, kmat, f_out, K_out, U_out, want_K=True):
     """Co-rotational Euler-Bernoulli beams, as :meth:`kite_env.structure.beam.BeamSet.internal`.
 
     Parameters
@@ -297,6 +321,9 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out, want_K=Tr
     x_e : (n, 2, 3) float [m]; R_e : (n, 2, 3, 3) float   node positions and nodal rotations.
     R0 : (n, 3, 3) float                                   reference element frames (columns e1, e2, e3).
     L0, EA : (n,) float [m], [N];  k11, k12 : (n, 3) float [N m]   local stiffness diagonals (``BeamSet._k11``).
+    kmat : (n, 2) float [1/(N m)]   rank-one material terms of a moment law ``m = k(theta) theta``
+                                  (``BeamSet._kmat``): ``dm/dtheta = K_l + g m m^T`` over the bending (column 0) and
+                                  the torsion (column 1) components; 0 for a linear element.
     f_out : (n, 12), K_out : (n, 12, 12), U_out : (n,) float   outputs (overwritten).
     want_K : bool   compute the tangent; False: only ``f_out`` and ``U_out`` are written (same values).
     """
@@ -437,6 +464,15 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, f_out, K_out, U_out, want_K=Tr
             for j in range(12):
                 KlB[0, a, j] = a11 * Bth[0, a, j] + a12 * Bth[1, a, j]
                 KlB[1, a, j] = a12 * Bth[0, a, j] + a11 * Bth[1, a, j]
+        gb, gt = kmat[e, 0], kmat[e, 1]
+        if gb != 0.0 or gt != 0.0:  # (dm/dtheta) B = K_l B + g m (m^T B) per component group
+            for j in range(12):
+                sb = m[0, 1] * Bth[0, 1, j] + m[0, 2] * Bth[0, 2, j] + m[1, 1] * Bth[1, 1, j] + m[1, 2] * Bth[1, 2, j]
+                st = m[0, 0] * Bth[0, 0, j] + m[1, 0] * Bth[1, 0, j]
+                for k in range(2):
+                    KlB[k, 0, j] += gt * m[k, 0] * st
+                    KlB[k, 1, j] += gb * m[k, 1] * sb
+                    KlB[k, 2, j] += gb * m[k, 2] * sb
         # ---- Z_k = Rr (T_k^{-T} (K_l B)_k + dT_k B_k) - [M_k]x W;  Zs = Z_0 + Z_1
         for k in range(2):
             for a in range(3):

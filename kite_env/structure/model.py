@@ -409,13 +409,12 @@ class FEModel:
     # -------------------------------------------------------------------------------------------- solve
     @staticmethod
     def _tube_strains(bs: BeamSet, state: NodalState):
-        """Curvature [1/m] and twist rate [rad/m] of tube elements for the secant law, each (n_e,)."""
+        """Curvature [1/m] and twist rate [rad/m] of tube elements for the secant law, each (n_e,): the larger end
+        curvature of the cubic element (:func:`kite_env.structure.tube.element_curvature`, the default of fsi.py's
+        ``structure.tube_curvature``)."""
         loc = bs.local_deformation(state.x[bs.conn], state.Rn[bs.conn])
-        th1, th2, L0 = loc["theta1"], loc["theta2"], loc["L0"][:, None]
-        # curvature at both ends of the cubic (Hermite) element; the larger magnitude governs (as in fsi.py)
-        kappa = np.maximum(np.linalg.norm((4 * th1[:, 1:] + 2 * th2[:, 1:]) / L0, axis=1),
-                           np.linalg.norm((2 * th1[:, 1:] + 4 * th2[:, 1:]) / L0, axis=1))
-        return kappa, np.abs(th2[:, 0] - th1[:, 0]) / L0[:, 0]
+        th1, th2, L0 = loc["theta1"], loc["theta2"], loc["L0"]
+        return tube.element_curvature(th1, th2, L0, "max_end"), np.abs(th2[:, 0] - th1[:, 0]) / L0
 
     def _update_tubes(self, state: NodalState) -> float:
         """Secant tube stiffness from the current shape; returns the largest relative stiffness change."""
@@ -426,7 +425,8 @@ class FEModel:
             kappa, phi = self._tube_strains(bs, state)
             EI, GJ = tube.secant_EI(props, kappa), tube.secant_GJ(props, phi)
             change = max(change, float(np.max(np.abs(EI / bs.EI2 - 1.0))), float(np.max(np.abs(GJ / bs.GJ - 1.0))))
-            bs.set_stiffness(EI2=EI, EI3=EI.copy(), GJ=GJ)
+            # held over the next Newton solve (a linear law there): no material tangent terms
+            bs.set_bending_torsion(np.arange(bs.n_elem), EI, GJ)
         return change
 
     def solve(self, load_steps: int = 10, *, mode: str = "full", tol_force: float = 1e-8, max_iter: int = 40,

@@ -16,9 +16,14 @@ load-deflection law ``P(v) = D (1 - exp(-(N/D) v))`` therefore becomes::
     T(phi)   = c1 arctan(c2 phi)                        GJ0 = c1 c2    (phi = twist per metre)
 
 The beam element uses the *secant* stiffness ``EI = M(kappa) / kappa`` and ``GJ = T(phi) / phi`` of its current
-curvature and twist, updated between coupling iterations (the paper's "deflection-dependent cross-sectional
-properties"). Collapse (local wrinkling through the tube) is flagged when the equivalent cantilever deflection
-``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the post-collapse state.
+curvature and twist, updated at every iterate (the paper's "deflection-dependent cross-sectional properties"). Which
+curvature of the cubic element the law is evaluated at is ``structure.tube_curvature`` (:func:`element_curvature`):
+the element's root-mean-square curvature makes the secant law the gradient of the stored energy
+``L0 (W(kappa) + W_t(phi))`` (:func:`bending_energy_density`, :func:`torsion_energy_density`), so the tubes are
+elastic and their tangent (:func:`secant_material_terms`) is exact; the default, the larger end curvature, is not
+a gradient (docs/flight_model.md, section 15). Collapse (local wrinkling through the tube) is flagged when the
+equivalent cantilever deflection ``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the
+post-collapse state.
 """
 
 from __future__ import annotations
@@ -121,6 +126,75 @@ def secant_GJ(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
     y = props.c2 * np.abs(np.asarray(phi, dtype=float))
     ratio = np.where(y < 1e-6, 1.0 - y**2 / 3.0, np.arctan(y) / np.maximum(y, 1e-300))
     return props.GJ0 * ratio
+
+
+#: curvature measures of a tube element for the secant law (``structure.tube_curvature``)
+CURVATURE_MEASURES = ("element_energy", "max_end")
+
+
+def element_curvature(theta1: np.ndarray, theta2: np.ndarray, L0: np.ndarray, measure: str = "element_energy"):
+    """Curvature [1/m] of cubic (Hermite) beam elements that the secant law is evaluated at, ``(n,)``.
+
+    ``theta1``, ``theta2`` (n, 3) [rad] local end rotations (x: twist, y/z: bending), ``L0`` (n,) [m]. The element's
+    curvature runs linearly from ``-(4 th1 + 2 th2) / L0`` to ``(2 th1 + 4 th2) / L0`` (each bending component).
+
+    * ``"element_energy"``: the root-mean-square curvature over the element, ``kappa^2 = (1/L0) int |kappa|^2 dx =
+      4 (|th1|^2 + th1 . th2 + |th2|^2) / L0^2`` (y and z). The element's bending energy is then
+      ``L0 W(kappa)`` with ``W(kappa) = int_0^kappa M`` (:func:`bending_energy_density`), and its gradient is exactly
+      the secant law ``M(kappa)/kappa`` times the linear element's moments: the tube forces are conservative
+      (a hyperelastic law is the gradient of its stored energy: Holzapfel, Nonlinear Solid Mechanics, Wiley 2000,
+      ch. 6).
+    * ``"max_end"``: the larger magnitude of the two end curvatures (the choice of stops before 27). It is not a
+      function of the element's energy, so ``EI(kappa) K theta`` is not a gradient: on a closed path of the
+      element's rotations its forces do net work (a free wing gained kinetic energy from nothing).
+    """
+    t1, t2 = np.asarray(theta1, dtype=float)[:, 1:], np.asarray(theta2, dtype=float)[:, 1:]
+    L0 = np.asarray(L0, dtype=float)
+    if measure == "element_energy":
+        s = np.einsum("ni,ni->n", t1, t1) + np.einsum("ni,ni->n", t1, t2) + np.einsum("ni,ni->n", t2, t2)
+        return 2.0 * np.sqrt(np.maximum(s, 0.0)) / L0
+    if measure == "max_end":
+        return np.maximum(np.linalg.norm(-(4 * t1 + 2 * t2), axis=1), np.linalg.norm(2 * t1 + 4 * t2, axis=1)) / L0
+    raise ValueError(f"tube curvature measure must be one of {CURVATURE_MEASURES}, got {measure!r}")
+
+
+def secant_material_terms(props: TubeProperties, kappa: np.ndarray, phi: np.ndarray, L0: np.ndarray):
+    """Material part of the tangent of the secant law at the element curvature ``kappa`` [1/m] (``"element_energy"``)
+    and twist per length ``phi`` [rad/m], both (n,), for elements of length ``L0`` [m].
+
+    The local moments of an element are ``m = EI_s(kappa) A theta`` (bending, ``A`` the linear element's matrix per
+    unit EI) with ``kappa^2 = theta^T A theta / L0``, so ``dm/dtheta = EI_s A + g_b m m^T`` with
+    ``g_b = (EI_t - EI_s) / (kappa^2 L0 EI_s^2)``, ``EI_t = dM/dkappa = EI0 exp(-EI0 kappa / M_max)`` the tangent
+    stiffness; likewise ``g_t = (GJ_t - GJ_s) / (phi^2 L0 GJ_s^2)`` with ``GJ_t = dT/dphi = c1 c2 / (1 + (c2 phi)^2)``.
+    Both are <= 0 (the law softens) and the full element tangent is positive semi-definite. Returns
+    ``(g_b, g_t)`` [1/(N m)], 0 where the element is undeformed."""
+    k = np.abs(np.asarray(kappa, dtype=float))
+    f = np.abs(np.asarray(phi, dtype=float))
+    L0 = np.asarray(L0, dtype=float)
+    x = props.EI0 * k / props.M_max
+    y = props.c2 * f
+    xs, ys = np.maximum(x, 1e-300), np.maximum(y, 1e-300)
+    dx = np.where(x < 1e-4, -0.5 * x + x**2 / 3.0 - x**3 / 8.0, np.exp(-xs) + np.expm1(-xs) / xs)
+    dy = np.where(y < 1e-4, -2.0 * y**2 / 3.0 + 4.0 * y**4 / 5.0, 1.0 / (1.0 + y**2) - np.arctan(ys) / ys)
+    EIs, GJs = secant_EI(props, k), secant_GJ(props, f)
+    g_b = np.where(x > 1e-12, props.EI0 * dx / (np.maximum(k, 1e-300) ** 2 * L0 * EIs**2), 0.0)
+    g_t = np.where(y > 1e-12, props.GJ0 * dy / (np.maximum(f, 1e-300) ** 2 * L0 * GJs**2), 0.0)
+    return g_b, g_t
+
+
+def bending_energy_density(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
+    """Stored bending energy per length [J/m], ``W(kappa) = int_0^|kappa| M(s) ds``
+    ``= M_max (|kappa| - (M_max / EI0) (1 - exp(-EI0 |kappa| / M_max)))``."""
+    k = np.abs(np.asarray(kappa, dtype=float))
+    r = props.M_max / props.EI0
+    return props.M_max * (k + r * np.expm1(-k / r))
+
+
+def torsion_energy_density(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
+    """Stored torsion energy per length [J/m], ``int_0^|phi| T(s) ds = c1 (phi atan(c2 phi) - ln(1 + c2^2 phi^2) /
+    (2 c2))``."""
+    y = props.c2 * np.abs(np.asarray(phi, dtype=float))
+    return props.c1 / props.c2 * (y * np.arctan(y) - 0.5 * np.log1p(y * y))
 
 
 def collapsed(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:

@@ -63,7 +63,8 @@ def _assert_beams_agree(conn, X0, up, stiff, x, Rn):
     # energy of the kernel (not used by BeamSet.energy, which stays NumPy)
     n = bn.n_elem
     U = np.empty(n)
-    kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, np.empty((n, 12)), np.empty((n, 12, 12)), U)
+    kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, bn._kmat, np.empty((n, 12)),
+                          np.empty((n, 12, 12)), U)
     _assert_energy_agree(U, bp.energy(xe, Re), K2, xe)
     return bp.local_deformation(xe, Re)
 

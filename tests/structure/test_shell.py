@@ -402,3 +402,62 @@ def test_pretensioned_square_membrane_first_natural_frequency():
         errs.append(abs(np.sqrt(w2.min()) - exact) / exact)
     assert errs[-1] < 0.01, errs  # measured 1.14 %, 0.28 %, 0.064 % on 6, 12, 24 squares a side
     assert min(np.log2(errs[0] / errs[1]), np.log2(errs[1] / errs[2])) > 1.8, errs  # second order in h
+
+
+# ------------------------------------------------------------------------ energy-consistent membrane force of a step
+def _membrane_step(rng, n=40, scale=0.01):
+    """Random triangles and two deformed states of them whose strains range over taut, wrinkled and slack."""
+    from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
+
+    X = _tilted_triangles(rng, n)
+    s = ShellSet(np.arange(3 * n).reshape(n, 3), X.reshape(-1, 3), E_CANOPY, NU, H_CANOPY)
+    x0 = X + scale * rng.normal(size=X.shape)
+    x1 = x0 + scale * rng.normal(size=X.shape)
+    args = (s.G, s.A0h, s.E, s.nu, s.C, s.eps_slack, s.wrinkling)
+    return s, x0, x1, (lambda a, b, **kw: membrane_discrete_gradient(a, b, *args, **kw)), \
+        (lambda a: membrane_internal(a, *args))
+
+
+def test_discrete_gradient_membrane_force_does_the_work_of_the_energy_change():
+    # Gonzalez's discrete gradient: sum_a f_a . (x1 - x0)_a = U(x1) - U(x0) exactly, across the wrinkling law's
+    # kinks (the steps below switch many elements between taut, wrinkled and slack), where the average of the end
+    # forces (the trapezoidal rule) misses it at the order of the step
+    rng = np.random.default_rng(3)
+    s, x0, x1, dg, internal = _membrane_step(rng)
+    st0, st1 = s.stresses(x0)["state"], s.stresses(x1)["state"]
+    assert np.sum(st0 != st1) >= 8 and len(set(st0)) == 3
+    f, U0, U1, _ = dg(x0, x1)
+    dx = (x1 - x0).reshape(len(x0), 9)
+    work = np.einsum("nk,nk->n", f, dx)
+    np.testing.assert_allclose(U0, internal(x0)[0], rtol=1e-12)
+    np.testing.assert_allclose(U1, internal(x1)[0], rtol=1e-12)
+    assert np.max(np.abs(work - (U1 - U0))) < 1e-10 * np.max(np.abs(U1 - U0))
+    trapezoid = np.einsum("nk,nk->n", 0.5 * (internal(x0)[1] + internal(x1)[1]), dx)
+    assert np.max(np.abs(trapezoid - (U1 - U0))) > 1e-3 * np.max(np.abs(U1 - U0))
+    # it is a force of internal stresses: no net force on the element
+    assert np.max(np.abs(f.reshape(-1, 3, 3).sum(axis=1))) < 1e-9 * np.max(np.abs(f))
+    # a step of zero length gives the force at the state
+    np.testing.assert_allclose(dg(x1, x1)[0], internal(x1)[1], rtol=0, atol=1e-12 * np.max(np.abs(f)))
+
+
+def test_discrete_gradient_membrane_force_is_second_order_and_its_tangent_exact():
+    rng = np.random.default_rng(4)
+    s, x0, _, dg, internal = _membrane_step(rng, scale=0.004)
+    s_ok = s.stresses(x0)["state"] == TAUT  # smooth law around taut elements: f_alg = f(x_mid) + O(h^2)
+    d = rng.normal(size=x0.shape)
+    errs = []
+    for h in (2e-4, 1e-4):
+        f = dg(x0 - h * d, x0 + h * d)[0]
+        errs.append(np.max(np.abs(f - internal(x0)[1])[s_ok]))
+    assert errs[0] / errs[1] > 3.5  # second order: error ratio 4 for half the step
+    # d f_alg / d x1 against finite differences
+    x1 = x0 + 0.003 * rng.normal(size=x0.shape)
+    K = dg(x0, x1, tangent=True)[3]
+    Kfd = np.empty_like(K)
+    for j in range(9):
+        a, i = divmod(j, 3)
+        p, m = x1.copy(), x1.copy()
+        p[:, a, i] += 1e-8
+        m[:, a, i] -= 1e-8
+        Kfd[:, :, j] = (dg(x0, p)[0] - dg(x0, m)[0]) / 2e-8
+    assert np.max(np.abs(K - Kfd)) < 1e-6 * np.max(np.abs(K))
