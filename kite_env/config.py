@@ -187,6 +187,13 @@ class ControlConfig:
     # above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower (docs/flight_model.md,
     # section 13) [m/s]
     line_speed_max_mps: float = 0.0
+    # how that limit acts: "steer_depower" = as the KCU's two motors, a steering motor for the difference and a
+    # depower motor for the common change of both lines (van der Vlugt et al., "Design and experimental
+    # characterization of a pumping kite power system", in Airborne Wind Energy, Springer 2013, ch. 23; Fechner et
+    # al., Renewable Energy 83, 705, 2015): half the difference (L_B - L_D)/2 and the mean (L_B + L_D)/2 each move
+    # at most line_speed_max_mps; "per_line" = each rest length on its own (stops 25-27: a saturated steering
+    # command then leaves the force loop no speed at all, docs/flight_model.md, section 16)
+    actuator_axes: str = "steer_depower"
 
 
 @dataclass(frozen=True)
@@ -399,6 +406,9 @@ def _validate(cfg: Config) -> None:
                           f"got {cfg.aero.cm_regression_ref_over_c}")
     if cfg.aero.damping not in AERO_DAMPING:
         raise ConfigError(f"config key 'aero.damping' must be one of {', '.join(AERO_DAMPING)}, got {cfg.aero.damping!r}")
+    if cfg.control.actuator_axes not in ("steer_depower", "per_line"):
+        raise ConfigError(f"config key 'control.actuator_axes' must be 'steer_depower' or 'per_line', "
+                          f"got {cfg.control.actuator_axes!r}")
     if cfg.structure.membrane_forces not in ("energy_consistent", "averaged"):
         raise ConfigError(f"config key 'structure.membrane_forces' must be 'energy_consistent' or 'averaged', "
                           f"got {cfg.structure.membrane_forces!r}")

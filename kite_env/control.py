@@ -83,7 +83,7 @@ class LineActuator:
         ``delta_l_star`` [m] is clipped to ``+-control.delta_l_max_m``; ``line_length`` and ``line_tension`` are the
         current lengths and tensions of the lines A, B, C, D. One call is one controller period
         (``control.control_dt_s``): it advances the force loop's integral, and the actuator moves from the last
-        period's rest lengths at most at ``control.line_speed_max_mps`` (:func:`rate_limit`).
+        period's rest lengths at most at ``control.line_speed_max_mps`` (:func:`actuate`).
         """
         cfg = self.cfg
         dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
@@ -96,7 +96,7 @@ class LineActuator:
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
-        L_B, L_D = float(rate_limit(L_B, self.last[0], cfg)), float(rate_limit(L_D, self.last[1], cfg))
+        L_B, L_D = (float(v) for v in actuate(L_B, L_D, self.last[0], self.last[1], cfg))
         self.last = (L_B, L_D)
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
 
@@ -109,6 +109,23 @@ def rate_limit(L, L_prev, cfg: ControlConfig):
         return L
     step = cfg.line_speed_max_mps * cfg.control_dt_s
     return np.clip(L, np.asarray(L_prev) - step, np.asarray(L_prev) + step)
+
+
+def actuate(L_B, L_D, L_B_prev, L_D_prev, cfg: ControlConfig):
+    """The rest lengths ``(L_B, L_D)`` the KCU reaches in one controller period from ``(L_B_prev, L_D_prev)``
+    (floats or arrays). With ``control.actuator_axes = "steer_depower"`` the KCU's steering motor moves half the
+    difference ``(L_B - L_D) / 2`` and its depower motor the mean ``(L_B + L_D) / 2``, each at most at
+    ``control.line_speed_max_mps``, so a saturated steering command leaves the force loop's common change its own
+    speed; ``"per_line"`` limits each rest length on its own (:func:`rate_limit`). No limit: as commanded."""
+    if cfg.line_speed_max_mps <= 0.0:
+        return L_B, L_D
+    if cfg.actuator_axes == "per_line":
+        return rate_limit(L_B, L_B_prev, cfg), rate_limit(L_D, L_D_prev, cfg)
+    step = cfg.line_speed_max_mps * cfg.control_dt_s
+    c_prev, d_prev = 0.5 * (np.asarray(L_B_prev) + L_D_prev), 0.5 * (np.asarray(L_B_prev) - L_D_prev)
+    c = np.clip(0.5 * (np.asarray(L_B) + L_D), c_prev - step, c_prev + step)
+    d = np.clip(0.5 * (np.asarray(L_B) - L_D), d_prev - step, d_prev + step)
+    return c + d, c - d
 
 
 def force_integral(integral, error, cfg: ControlConfig):

@@ -175,6 +175,8 @@ def run_episode(env, agent, seed: int | None = None, options: dict | None = None
     summed over the episode, and the episode's draws (``env.episode_info``). ``progress(t)`` is called after every control step."""
     env.recorder = FlightRecorder(env.cfg, env.path) if record else None
     obs, _ = env.reset(seed=seed, options=options)
+    if seed is not None and hasattr(agent, "seed_episode"):
+        agent.seed_episode(seed)  # a stochastic policy's draws per episode (RandomAgent)
     terms: dict[str, float] = {}
     ret, steps, done, info = 0.0, 0, False, {}
     start = True

@@ -265,3 +265,20 @@ def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
     assert [ln.split("|")[1].strip() for ln in md[2:]] == ["random", "constant_0", first.name]
     rows = (out / "compare.csv").read_text().strip().splitlines()
     assert len(rows) == 4 and rows[0].startswith("policy,episodes,return mean")
+
+
+def test_a_random_episode_does_not_depend_on_the_episodes_before_it():
+    """RandomAgent is reseeded with each episode's seed by run_episode: episode 1 of a run is the episode flown
+    alone with its seed (scripts/end_reasons.py splits its episodes over processes by seed)."""
+    from agents.policies import RandomAgent
+
+    def returns(seeds):
+        env = kite_env.envs.figure_eight.KiteFigureEightEnv(overrides=["env.max_episode_s=0.3"], fidelity="surrogate")
+        agent = RandomAgent(seeds[0])
+        out = [kite_env.flight.run_episode(env, agent, seed=s, record=False)[1]["episode_return"] for s in seeds]
+        env.close()
+        return out
+
+    both, alone = returns([4, 5]), returns([5])
+    assert both[1] == alone[0]
+    assert both[0] != both[1]  # the seeds draw other actions

@@ -37,7 +37,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from kite_env.config import Config
-from kite_env.control import force_integral, force_ratio_error, rate_limit
+from kite_env.control import actuate, force_integral, force_ratio_error
 from kite_env.dynamics.fast import NON_FINITE, OK, SurrogateKites
 from kite_env.envs.figure_eight import INFO_FEATURES, KiteFigureEightEnv, resolve_config, reward_terms
 from kite_env.envs.observe import FEATURES, N_PARTS
@@ -188,8 +188,8 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self.force_integral = np.where(run, force_integral(self.force_integral, err, c), self.force_integral)
         L3 = -c.k3_m * err - c.k3i_per_s * self.force_integral  # Eq. (19) + integral (control.py)
         e = dls - dl
-        L_B = np.where(run, rate_limit(self.L_B0 + c.k2 * e + L3, self.L_B, c), self.L_B)  # Eq. (16)
-        L_D = np.where(run, rate_limit(self.L_D0 - c.k2 * e + L3, self.L_D, c), self.L_D)  # Eq. (17)
+        L_B, L_D = actuate(self.L_B0 + c.k2 * e + L3, self.L_D0 - c.k2 * e + L3, self.L_B, self.L_D, c)  # Eq. 16-17
+        L_B, L_D = np.where(run, L_B, self.L_B), np.where(run, L_D, self.L_D)
         if not (np.all(L_B[run] > 0) and np.all(L_D[run] > 0) and np.all(np.isfinite(L_B[run]))
                 and np.all(np.isfinite(L_D[run]))):
             raise ValueError(f"steering-line rest lengths must be positive and finite, got {L_B}, {L_D}")
