@@ -98,7 +98,7 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Action Space
 
-    ``Box(-1, 1, (1,), float32)``: desired ``dl* = l_B - l_D`` divided by ``control.delta_l_max_m`` (0.25 m by
+    ``Box(-1, 1, (1,), float32)``: desired ``dl* = l_B - l_D`` divided by ``control.delta_l_max_m`` (1.5 m by
     default). ``dl* < 0`` pulls the right steering line and turns the kite to its right. The action is held for
     ``control.control_dt_s`` (0.02 s, four physics steps of ``dynamics.dt_s``).
 
