@@ -182,8 +182,8 @@ class ControlConfig:
     beta_distance_deg: float = 4.0  # blending: beta = 1/2 at this distance to the path (on the unit sphere) [deg]
     beta_min: float = 0.2  # blending: smallest weight of the path tangent [-]
     control_dt_s: float = 0.02  # controller update period [s]
-    # speed limit of the KCU's steering-line actuator: each rest length moves by at most this times control_dt_s
-    # per controller period (kite_env.control.rate_limit); 0 = none, the paper's Eq. 16-17 (default). 2 m/s is
+    # speed limit of the KCU's steering-line actuator, per controller period at most this times control_dt_s on
+    # each axis of actuator_axes (kite_env.control.actuate); 0 = none, the paper's Eq. 16-17 (default). 2 m/s is
     # above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower (docs/flight_model.md,
     # section 13) [m/s]
     line_speed_max_mps: float = 0.0
