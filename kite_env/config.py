@@ -315,6 +315,20 @@ _NON_NEGATIVE = {
 }
 
 
+# keys that name one of a few models or modes, with their allowed values
+_CHOICES = {
+    "aero.damping": tuple(AERO_DAMPING),
+    "control.actuator_axes": ("steer_depower", "per_line"),
+    "structure.membrane_forces": ("energy_consistent", "averaged"),
+    "structure.tube_curvature": ("element_energy", "max_end"),
+    "aero.negative_alpha": ("bounded", "breukels"),
+    "aero.rotation_point": tuple(ROTATION_POINTS),
+    "sim.fidelity": tuple(FIDELITIES),
+    "sim.surrogate_start": ("table", "fe", "table_only"),
+    "dynamics.winch": ("fixed", "force"),
+    "dynamics.tether": ("rod", "rope"),
+}
+
 def _coerce(key: str, value: Any, default: Any) -> Any:
     """Convert ``value`` to the type of ``default`` or raise a ConfigError naming ``key``."""
     typ = type(default)
@@ -404,32 +418,13 @@ def _validate(cfg: Config) -> None:
     if not 0.0 <= cfg.aero.cm_regression_ref_over_c <= 1.0:
         raise ConfigError("config key 'aero.cm_regression_ref_over_c' must lie in [0, 1], "
                           f"got {cfg.aero.cm_regression_ref_over_c}")
-    if cfg.aero.damping not in AERO_DAMPING:
-        raise ConfigError(f"config key 'aero.damping' must be one of {', '.join(AERO_DAMPING)}, got {cfg.aero.damping!r}")
-    if cfg.control.actuator_axes not in ("steer_depower", "per_line"):
-        raise ConfigError(f"config key 'control.actuator_axes' must be 'steer_depower' or 'per_line', "
-                          f"got {cfg.control.actuator_axes!r}")
-    if cfg.structure.membrane_forces not in ("energy_consistent", "averaged"):
-        raise ConfigError(f"config key 'structure.membrane_forces' must be 'energy_consistent' or 'averaged', "
-                          f"got {cfg.structure.membrane_forces!r}")
-    if cfg.structure.tube_curvature not in ("element_energy", "max_end"):
-        raise ConfigError(f"config key 'structure.tube_curvature' must be 'element_energy' or 'max_end', "
-                          f"got {cfg.structure.tube_curvature!r}")
-    if cfg.aero.negative_alpha not in ("bounded", "breukels"):
-        raise ConfigError(f"config key 'aero.negative_alpha' must be 'bounded' or 'breukels', "
-                          f"got {cfg.aero.negative_alpha!r}")
-    if cfg.aero.rotation_point not in ROTATION_POINTS:
-        raise ConfigError(f"config key 'aero.rotation_point' must be one of {', '.join(ROTATION_POINTS)}, "
-                          f"got {cfg.aero.rotation_point!r}")
-    if cfg.sim.fidelity not in FIDELITIES:
-        raise ConfigError(f"config key 'sim.fidelity' must be one of {', '.join(FIDELITIES)}, got {cfg.sim.fidelity!r}")
-    if cfg.sim.surrogate_start not in ("table", "fe", "table_only"):
-        raise ConfigError("config key 'sim.surrogate_start' must be 'table', 'fe' or 'table_only', got "
-                          f"{cfg.sim.surrogate_start!r}")
-    if cfg.dynamics.winch not in ("fixed", "force"):
-        raise ConfigError(f"config key 'dynamics.winch' must be 'fixed' or 'force', got {cfg.dynamics.winch!r}")
-    if cfg.dynamics.tether not in ("rod", "rope"):
-        raise ConfigError(f"config key 'dynamics.tether' must be 'rod' or 'rope', got {cfg.dynamics.tether!r}")
+    for key, choices in _CHOICES.items():
+        section, name = key.split(".")
+        v = getattr(getattr(cfg, section), name)
+        if v not in choices:
+            names = [repr(c) for c in choices]
+            allowed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+            raise ConfigError(f"config key '{key}' must be {allowed}, got {v!r}")
     if cfg.dynamics.tether == "rope" and not cfg.structure.dynamic:
         raise ConfigError("config key 'dynamics.tether' = 'rope' needs structure.dynamic = true (a slack tether "
                           "unloads the bridle, which the quasi-static wing cannot follow)")
