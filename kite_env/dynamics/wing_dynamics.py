@@ -325,11 +325,12 @@ class WingDynamics:
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
         self.energy_consistent_membrane = cfg.structure.membrane_forces == "energy_consistent"
-        sh = wing.shells
-        self._shell_dofs = (6 * sh.conn[:, :, None] + np.arange(3)[None, None, :]).reshape(-1)
-        self._shell_map = asm._set_maps[[i for i, es in enumerate(asm.sets) if es is sh][0]].reshape(-1, 18, 18)
-        tr = (6 * np.arange(3)[:, None] + np.arange(3)[None, :]).ravel()  # translations of the element's 18 DOF
-        self._shell_tt = self._shell_map[:, tr][:, :, tr]  # (n, 9, 9) pattern positions of the membrane's blocks
+        if self.energy_consistent_membrane:  # scatter maps of the canopy's translations (membrane_force, ..._tangent_)
+            sh = wing.shells
+            self._shell_dofs = (6 * sh.conn[:, :, None] + np.arange(3)[None, None, :]).reshape(-1)
+            shell_map = asm._set_maps[[i for i, es in enumerate(asm.sets) if es is sh][0]].reshape(-1, 18, 18)
+            tr = (6 * np.arange(3)[:, None] + np.arange(3)[None, :]).ravel()  # translations of the element's 18 DOF
+            self._shell_tt = shell_map[:, tr][:, :, tr]  # (n, 9, 9) pattern positions of the membrane's blocks
 
     def membrane_force(self, x: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
         """The canopy's membrane forces (n_dof,) [N] on the translations: at the positions ``x`` (n_nodes, 3) or,
@@ -353,8 +354,7 @@ class WingDynamics:
         Ka = membrane_discrete_gradient(x0[sh.conn], x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack,
                                         sh.wrinkling, tangent=True)[3]
         dK = Ka / (1.0 - self.alpha.alpha_f) - K1
-        return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.wing._mono_solvers[
-            "prescribed"].asm.nnz)
+        return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.solver.asm.nnz)
 
     # ------------------------------------------------------------------ pieces
     def section_weights(self, x_sec: np.ndarray) -> np.ndarray:

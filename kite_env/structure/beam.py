@@ -314,11 +314,11 @@ class BeamSet:
         KlB = np.empty_like(Bth)
         KlB[:, 0] = self._k11[:, :, None] * Bth[:, 0] + self._k12[:, :, None] * Bth[:, 1]
         KlB[:, 1] = self._k12[:, :, None] * Bth[:, 0] + self._k11[:, :, None] * Bth[:, 1]
-        # material terms of a nonlinear moment law: (dm/dtheta) B = K_l B + g m (m^T B) (bending y, z; twist x)
-        sb = np.einsum("nka,nkaj->nj", m[:, :, 1:], Bth[:, :, 1:])
-        st = np.einsum("nk,nkj->nj", m[:, :, 0], Bth[:, :, 0])
-        KlB[:, :, 1:] += self._kmat[:, 0, None, None, None] * m[:, :, 1:, None] * sb[:, None, None, :]
-        KlB[:, :, 0] += self._kmat[:, 1, None, None] * m[:, :, 0, None] * st[:, None, :]
+        if np.any(self._kmat):  # material terms of a nonlinear moment law: (dm/dtheta) B = K_l B + g m (m^T B)
+            sb = np.einsum("nka,nkaj->nj", m[:, :, 1:], Bth[:, :, 1:])  # bending y, z
+            st = np.einsum("nk,nkj->nj", m[:, :, 0], Bth[:, :, 0])  # twist x
+            KlB[:, :, 1:] += self._kmat[:, 0, None, None, None] * m[:, :, 1:, None] * sb[:, None, None, :]
+            KlB[:, :, 0] += self._kmat[:, 1, None, None] * m[:, :, 0, None] * st[:, None, :]
         Y = np.einsum("nkba,nkbj->nkaj", Tinv, KlB) + np.einsum("nkab,nkbj->nkaj", _dTinvT_m(th, m), Bth)
         Z = np.einsum("nab,nkbj->nkaj", Rr, Y) - np.einsum("nkab,nbj->nkaj", skew(Mi), W)
         K = np.einsum("nkai,nkaj->nij", E, Z)
