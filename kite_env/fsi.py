@@ -55,6 +55,8 @@ class WingConvergenceError(RuntimeError):
                 lines.append(f"  {h['iter']:3d}  {h['dx_max_m']:.3e}  {h['dload_rel']:.3e}  {h['newton_iters']}")
             elif "retry" in h:
                 lines.append(f"  retry {h['retry']} with {h['n_sub']} bridle sub-steps")
+            elif "cutback" in h:
+                lines.append(f"  load increment to scale {h['cutback']:.4g} halved")
         super().__init__("\n".join(lines))
         self.history = history
 
@@ -312,6 +314,33 @@ class AeroelasticWing:
     CM_CONTINUATION_START = 0.25
     CM_CONTINUATION_STEP = 0.05
 
+    def _cold_ramp(self, state, q_b, flight, dt, support, last, h0, history, step):
+        """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
+        of ``h0`` (``1 / fsi.cold_load_steps``), each converged. An increment whose solve fails is halved (down to
+        ``h0 / 64``) and grows back after each converged one: automatic load incrementation with cutback (Crisfield,
+        *Non-linear Finite Element Analysis of Solids and Structures*, Vol. 1, Wiley 1991, ch. 9). From the
+        unloaded wing, whose canopy is slack and whose tangent is nearly singular, the fixed first sixth of the load
+        was too far for Newton in 20 % of the randomized starts of ``scripts/end_reasons.py`` (docs/flight_model.md,
+        section 17). Only the path to the equilibrium changes."""
+        s, h = 0.0, h0
+        while s < last - 1e-12:
+            nxt = min(last, s + h)
+            tension = self.lines.tension.copy()
+            try:
+                state, _ = step(state, q_b, flight, dt, support, nxt, history)
+            except WingConvergenceError:
+                self.lines.tension[:] = tension
+                for solver in self._mono_solvers.values():
+                    solver.forget_factorization()
+                h *= 0.5
+                if h < h0 / 64:
+                    raise
+                history.append({"cutback": nxt})
+                continue
+            s = nxt
+            h = min(2.0 * h, h0)
+        return state
+
     def _cm_continuation(self, state, q_b, flight, dt, support, ramp, history, step, method):
         """A cold solve with Breukels' C_M taken about a point ahead of the quarter chord (``aero.
         cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation: the load ramp with the C_M about
@@ -471,8 +500,8 @@ class AeroelasticWing:
         if cold and self.cfg.aero.cm_regression_ref_over_c < self.CM_CONTINUATION_START:
             self._cm_ref = self.CM_CONTINUATION_START  # the load ramp with C_M about c/4 (_cm_continuation)
         try:
-            for scale in ramp[:-1]:
-                state, sol = step(state, q_b, flight, dt, support, scale, history)
+            if len(ramp) > 1:
+                state = self._cold_ramp(state, q_b, flight, dt, support, ramp[-2], 1.0 / len(ramp), history, step)
             if cold:
                 state = self._cm_continuation(state, q_b, flight, dt, support, ramp, history, step, method)
         finally:
@@ -541,7 +570,7 @@ class AeroelasticWing:
         fixed, du_fixed = self._support(state, q_b, support)
         n_outer = 1 if support == "prescribed" else fcfg.max_coupling_iter
         load = _AeroLoad(self, solver.asm, flight, dt, scale)
-        if support == "lines" and not history:
+        if support == "lines" and not any("method" in h for h in history):  # before the first converged solve
             # first guess of the line tensions: the aerodynamic force shared by the four lines
             f0 = load.force(state).reshape(-1, 6)[:, :3].sum(axis=0)
             self.lines.tension[:] = max(float(np.linalg.norm(f0)) / 4.0, 1.0)

@@ -8,7 +8,8 @@ section's ranges; by default winds 4-10 m/s, turbulence up to 0.15 and starts an
 below, each overridable with ``--set``), split over ``--jobs`` processes by their seeds (episode ``i`` has seed
 ``seed + i`` whichever process flies it). Writes ``episodes.csv`` (all episodes) and ``end_reasons.md`` (the table)
 under ``--out`` and prints the table. A numerical end ("wing did not converge", "non-finite ...") is a bug of the
-simulator; ground contact and (on the paper's rod tether) a slack tether are physical ends.
+simulator; ground contact and (on the paper's rod tether) a slack tether are physical ends. A drawn start whose wing
+does not converge is drawn again by the env; the table's last line counts those failed starts.
 """
 
 from __future__ import annotations
@@ -72,7 +73,9 @@ def main(argv=None) -> int:
                                                                   else "physical")
         lines.append(f"| {reason} | {n} | {kind} | {t[len(t) // 2]:.2f} | {t[0]:.2f} |")
     winds = sorted(float(r["wind_speed_mps"]) for r in rows)
-    lines += ["", f"wind {winds[0]:.1f}-{winds[-1]:.1f} m/s"]
+    # a start that does not converge is drawn again by the env (env.reset_attempts): numerical too, counted here
+    failed = sum(int(r.get("failed_starts") or 0) for r in rows)
+    lines += ["", f"wind {winds[0]:.1f}-{winds[-1]:.1f} m/s; starts that did not converge (drawn again): {failed}"]
     text = "\n".join(lines)
     (out / "end_reasons.md").write_text(text + "\n")
     print(text)

@@ -175,6 +175,26 @@ def test_non_convergence_raises_with_history():
     assert any(h.get("retry") == 1 for h in exc.value.history)  # retried once with finer bridle sub-steps
 
 
+def test_a_cold_start_halves_a_load_increment_that_is_too_far():
+    """Automatic load incrementation of a cold solve (``AeroelasticWing._cold_ramp``). At this start (the first draw
+    of seed 107 of ``scripts/end_reasons.py``: 34.7 m/s along the path, 9 deg sideways in K) the first sixth of the
+    dynamic pressure is too far for Newton from the unloaded wing, whose slack canopy has a nearly singular
+    tangent; the start failed, and the env drew another one. The increment is halved until it converges and grows
+    back, and the wing reaches the equilibrium of a four times finer ramp."""
+    X = FlightState(v_kite=np.array([-33.8810714, 7.33338837, 0.0]), omega=np.zeros(3),
+                    v_wind=np.array([2.7558044, 7.33338837, 3.13059484]))
+    wing = AeroelasticWing(build_kite("rhino16"), Config())
+    sol = wing.solve(None, X, support="lines", warm=False)
+    assert any("cutback" in h for h in sol.history)
+    cfg = Config()
+    fine = AeroelasticWing(build_kite("rhino16"), dataclasses.replace(cfg, fsi=dataclasses.replace(cfg.fsi,
+                                                                                                cold_load_steps=24)))
+    ref = fine.solve(None, X, support="lines", warm=False)
+    np.testing.assert_allclose(sol.F_b, ref.F_b, rtol=0, atol=1e-3 * np.abs(ref.F_b).max())
+    np.testing.assert_allclose(sol.nodes, ref.nodes, rtol=0, atol=1e-4)
+    assert -sol.F_b.sum(axis=0)[2] > 5000.0  # the loaded wing (10 kN), not a collapsed one
+
+
 def test_bad_input_rejected():
     wing = AeroelasticWing(build_kite("rhino16", n_sections=11, n_chord=4), Config())
     fl = FlightState.wind_tunnel(AIRSPEED, ALPHA_K)

@@ -209,6 +209,7 @@ class KiteFigureEightEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)} (valid: 'wind_seed')")
         last_error = None
+        failed_starts = 0  # draws whose start did not converge (a numerical failure; the env draws again)
         for _ in range(env.reset_attempts if env.randomize else 1):
             rng = self.np_random
             if env.randomize:
@@ -240,6 +241,7 @@ class KiteFigureEightEnv(gym.Env):
                 break
             except SimulationError as exc:
                 last_error = exc
+                failed_starts += 1
         else:
             raise RuntimeError(f"reset failed: the wing did not converge at the start ({last_error})")
         self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
@@ -249,7 +251,7 @@ class KiteFigureEightEnv(gym.Env):
         self.steps = 0
         self.substepped_steps = 0  # physics steps split because the wing failed at the full step (sim.step)
         self.episode_info = {"wind_speed_mps": wind_speed, "turbulence_intensity": ti, "wind_seed": wind_seed,
-                             "start_s": s0, "initial_speed_mps": v0}
+                             "start_s": s0, "initial_speed_mps": v0, "failed_starts": failed_starts}
         self._trail = [self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4])]
         if self.recorder is not None:
             self.recorder.start(self.sim, self.rec, s0, self.L_B, self.L_D,

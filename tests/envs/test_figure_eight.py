@@ -151,6 +151,35 @@ def test_evaluation_conditions_use_the_wind_section_as_configured():
     assert 8.0 <= info["wind_speed_mps"] <= 9.0 and info["wind_seed"] != 11
 
 
+def test_a_start_that_does_not_converge_is_drawn_again_and_counted():
+    """A randomized reset whose wing does not converge at the drawn start draws new conditions (up to
+    ``env.reset_attempts``); ``info["failed_starts"]`` counts those failures, so that they are not hidden
+    (``scripts/end_reasons.py`` sums them); with none left the reset raises, naming the start."""
+    from kite_env.dynamics.simulator import SimulationError
+
+    env = KiteFigureEightEnv(overrides=["env.reset_attempts=3"])
+    _, info = env.reset(seed=0)
+    assert info["failed_starts"] == 0
+    real, calls = env.sim.reset, []
+
+    def flaky(*args, **kwargs):
+        calls.append(env.sim.wind.cfg.seed)  # the drawn wind realisation of this attempt
+        if len(calls) <= 2:
+            raise SimulationError("wing did not converge at the initial state", "test")
+        return real(*args, **kwargs)
+
+    env.sim.reset = flaky
+    _, info = env.reset(seed=0)
+    assert info["failed_starts"] == 2 and len(calls) == 3
+    assert info["wind_seed"] == calls[-1] and len(set(calls)) == 3  # a new draw each time
+    def never(*args, **kwargs):
+        raise SimulationError("wing did not converge at the initial state", "test")
+
+    env.sim.reset = never
+    with pytest.raises(RuntimeError, match="did not converge at the start"):
+        env.reset(seed=1)
+
+
 def test_bad_env_config_is_one_clear_error():
     with pytest.raises(ConfigError, match="env.observation"):
         KiteFigureEightEnv(overrides=["env.observation=position,bogus"])
