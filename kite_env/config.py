@@ -44,12 +44,12 @@ class StructureConfig:
     # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public (physics_facts 4.5):
     # modelling choice of twice the canopy's membrane stiffness E h = 1e5 N/m (tube fabric is a heavier cloth).
     tube_wall_Et_N_per_m: float = 2.0e5  # [N/m]
-    # curvature of a tube element that Breukels' secant law is evaluated at: "max_end" = the larger end curvature
-    # (not the gradient of an energy: not conservative, its tangent 4 % off); "element_energy" = the element's
+    # curvature of a tube element that Breukels' secant law is evaluated at: "element_energy" = the element's
     # root-mean-square curvature (the law is then the gradient of a stored energy, with an exact tangent;
-    # kite_env.structure.tube.element_curvature). Not the default yet: with it the quasi-static cold start at
-    # 20 m/s of tests/dynamics/test_flight.py fails (docs/flight_model.md, section 15)
-    tube_curvature: str = "max_end"
+    # kite_env.structure.tube.element_curvature); "max_end" = the larger end curvature (stops before 29: not the
+    # gradient of an energy, not conservative, its tangent 4 % off, and it over-softens an S-bent element: the
+    # folding struts of the high-wind random episodes; docs/flight_model.md, sections 15 and 17)
+    tube_curvature: str = "element_energy"
     # tip beams ("thin stiff beam", Sect. II.A): a solid glass-fibre rod (modelling choice), diameter from the mesh
     tip_rod_E_Pa: float = 30.0e9  # [Pa]
     # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)

@@ -195,6 +195,27 @@ def test_a_cold_start_halves_a_load_increment_that_is_too_far():
     assert -sol.F_b.sum(axis=0)[2] > 5000.0  # the loaded wing (10 kN), not a collapsed one
 
 
+def test_a_cold_solve_of_the_conservative_tube_law_ends_on_that_law():
+    """A cold solve with ``structure.tube_curvature = element_energy`` (the default) follows its load ramp and C_M
+    continuation with the larger-end law and makes its last solve with the conservative law's exact tangent
+    (``AeroelasticWing.solve``): the equilibrium it returns is that of the conservative law (every tube at its
+    secant of the element's rms curvature; force balance), not of the law of the path."""
+    from kite_env.structure import tube
+
+    wing = AeroelasticWing(build_kite("rhino16"), Config())
+    sol = wing.solve(None, FlightState.wind_tunnel(AIRSPEED, ALPHA_K), support="lines", warm=False)
+    state = wing.state
+    assert wing.cfg.structure.tube_curvature == "element_energy"
+    assert abs(sol.F_b.sum(axis=0)[2]) > 1000.0
+    assert wing._tube_law is None and not wing._exact_tube_tangent  # nothing of the path is left
+    tb = wing._is_tube
+    _, th = wing.beams.local_rotations(state.x[wing.mesh.beams], state.Rn[wing.mesh.beams])
+    kappa = tube.element_curvature(th[tb, 0], th[tb, 1], wing.beams.L0[tb], "element_energy")
+    np.testing.assert_allclose(wing.beams.EI2[tb], tube.secant_EI(wing.tube_props, kappa), rtol=1e-6)
+    kappa_end = tube.element_curvature(th[tb, 0], th[tb, 1], wing.beams.L0[tb], "max_end")
+    assert np.max(np.abs(tube.secant_EI(wing.tube_props, kappa_end) / wing.beams.EI2[tb] - 1.0)) > 1e-3
+
+
 def test_bad_input_rejected():
     wing = AeroelasticWing(build_kite("rhino16", n_sections=11, n_chord=4), Config())
     fl = FlightState.wind_tunnel(AIRSPEED, ALPHA_K)
