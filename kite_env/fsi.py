@@ -318,20 +318,20 @@ class AeroelasticWing:
     CM_CONTINUATION_START = 0.25
     CM_CONTINUATION_STEP = 0.05
 
-    def _cold_ramp(self, state, q_b, flight, dt, support, last, h0, history, step):
-        """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
-        of ``h0`` (``1 / fsi.cold_load_steps``), each converged. An increment whose solve fails is halved (down to
-        ``h0 / 64``) and grows back after each converged one: automatic load incrementation with cutback (Crisfield,
-        *Non-linear Finite Element Analysis of Solids and Structures*, Vol. 1, Wiley 1991, ch. 9). From the
-        unloaded wing, whose canopy is slack and whose tangent is nearly singular, the fixed first sixth of the load
-        was too far for Newton in 20 % of the randomized starts of ``scripts/end_reasons.py`` (docs/flight_model.md,
-        section 17). Only the path to the equilibrium changes."""
-        s, h = 0.0, h0
-        while s < last - 1e-12:
-            nxt = min(last, s + h)
+    def _continuation(self, state, start: float, target: float, h0: float, solve_at, history) -> NodalState:
+        """Continuation of a cold solve in one parameter from ``start`` to ``target`` in steps of at most ``h0``,
+        each converged (``solve_at(state, value)`` returns the converged state at ``value``). A step whose solve fails
+        is halved (down to ``h0 / 64``; then the failure is raised) and grows back after each converged one:
+        automatic incrementation with cutback (Crisfield, *Non-linear Finite Element Analysis of Solids and
+        Structures*, Vol. 1, Wiley 1991, ch. 9). A failed step leaves the last converged state and line tensions.
+        Only the path to the equilibrium changes."""
+        sign = 1.0 if target >= start else -1.0
+        current, h = start, h0
+        while sign * (target - current) > 1e-12:
+            nxt = current + sign * min(h, sign * (target - current))
             tension = self.lines.tension.copy()
             try:
-                state, _ = step(state, q_b, flight, dt, support, nxt, history)
+                state = solve_at(state, nxt)
             except WingConvergenceError:
                 self.lines.tension[:] = tension
                 for solver in self._mono_solvers.values():
@@ -341,35 +341,36 @@ class AeroelasticWing:
                     raise
                 history.append({"cutback": nxt})
                 continue
-            s = nxt
+            current = nxt
             h = min(2.0 * h, h0)
         return state
 
+    def _cold_ramp(self, state, q_b, flight, dt, support, last, h0, history, step):
+        """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
+        of ``h0`` (``1 / fsi.cold_load_steps``) by :meth:`_continuation`. From the unloaded wing, whose canopy is
+        slack and whose tangent is nearly singular, the fixed first sixth of the load was too far for Newton in 20 %
+        of the randomized starts of ``scripts/end_reasons.py`` (docs/flight_model.md, section 17)."""
+        return self._continuation(state, 0.0, last, h0,
+                                  lambda st, scale: step(st, q_b, flight, dt, support, scale, history)[0], history)
+
     def _cm_continuation(self, state, q_b, flight, dt, support, ramp, history, step, method):
         """A cold solve with Breukels' C_M taken about a point ahead of the quarter chord (``aero.
-        cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation: the load ramp with the C_M about
-        the quarter chord, then the point moved forward in steps of 0.05 c (halved where Newton fails, down to 1/64 of
-        that), each converged. From the unloaded wing
-        directly it fails: there the mid sections sit at alpha of about 0.3 deg, where the centre of pressure of
-        a nose-referenced C_M lies far ahead of the nose and pushes the aft canopy to the pressure side. Only the path
-        to the equilibrium changes. Returns the state to start the final solve from."""
+        cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation (:meth:`_continuation`): the
+        load ramp with the C_M about the quarter chord, then the point moved forward in steps of 0.05 c, each
+        converged. From the unloaded wing directly it fails: there the mid sections sit at alpha of about 0.3 deg,
+        where the centre of pressure of a nose-referenced C_M lies far ahead of the nose and pushes the aft canopy
+        to the pressure side. Returns the state to start the final solve from."""
         target = self.cfg.aero.cm_regression_ref_over_c
         if target >= self.CM_CONTINUATION_START:
             return state
-        current, h = self.CM_CONTINUATION_START, self.CM_CONTINUATION_STEP
-        while current > target + 1e-12:
-            nxt = max(target, current - h)
-            self._cm_ref = float(nxt)
-            try:
-                state, _ = self._attempts(state, state.x[self.bridle].copy(), q_b, 1, False, flight, dt, support,
-                                          ramp[-1], history, step, method)
-            except WingConvergenceError:
-                h *= 0.5  # a step too far for Newton: halve it (the state is still the last converged one)
-                if h < self.CM_CONTINUATION_STEP / 64:
-                    raise
-                continue
-            current = nxt
-        return state
+
+        def solve_at(st, ref):
+            self._cm_ref = float(ref)
+            return self._attempts(st, st.x[self.bridle].copy(), q_b, 1, False, flight, dt, support, ramp[-1],
+                                  history, step, method)[0]
+
+        return self._continuation(state, self.CM_CONTINUATION_START, target, self.CM_CONTINUATION_STEP, solve_at,
+                                  history)
 
     def _aero_options(self) -> dict:
         """Keyword arguments of :func:`kite_env.aero.loads.section_loads` from ``cfg.aero``."""
