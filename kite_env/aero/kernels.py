@@ -48,6 +48,8 @@ _JIT = dict(cache=True, fastmath=False, nogil=True)
 
 # Thresholds of the reference implementation (literals: see the module docstring; checked by the tests).
 _FLAT_FRACTION = 0.02  # sections._FLAT_FRACTION: e_y blends to the LE tangent below this mean offset / chord
+_PLANE_COS_FULL = 0.8660254037844386  # sections._PLANE_COS_FULL / _NONE: and where the plane normal is 30-60 deg
+_PLANE_COS_NONE = 0.5  # from the LE tangent
 _TINY = 1e-300  # sections.section_geometry: floor of the offset length in the plane normal
 _ALPHA_POLY_MAX_DEG = 20.0  # breukels.ALPHA_POLY_MAX_DEG
 _ALPHA_FP_MIN_DEG = 30.0  # breukels.ALPHA_FP_MIN_DEG
@@ -241,11 +243,13 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
         # airfoil-plane normal h × e_x, oriented like the LE line
         p = 1.0 / max(h_len, _TINY)
         n0, n1, n2 = (h1 * ex2 - h2 * ex1) * p, (h2 * ex0 - h0 * ex2) * p, (h0 * ex1 - h1 * ex0) * p
-        if n0 * t0 + n1 * t1 + n2 * t2 < 0.0:
+        cos_pl = n0 * t0 + n1 * t1 + n2 * t2
+        if cos_pl < 0.0:
             n0, n1, n2 = -n0, -n1, -n2
-        # smoothstep blend to the LE tangent for nearly flat sections
+        # smoothstep blend to the LE tangent for nearly flat sections and planes far from the section's
         u = min(max(h_len / (_FLAT_FRACTION * chord_nodes), 0.0), 1.0)
-        wgt = u * u * (3.0 - 2.0 * u)
+        v = min(max((abs(cos_pl) - _PLANE_COS_NONE) / (_PLANE_COS_FULL - _PLANE_COS_NONE), 0.0), 1.0)
+        wgt = u * u * (3.0 - 2.0 * u) * v * v * (3.0 - 2.0 * v)
         ey0, ey1, ey2 = wgt * n0 + (1.0 - wgt) * t0, wgt * n1 + (1.0 - wgt) * t1, wgt * n2 + (1.0 - wgt) * t2
         p = ey0 * ex0 + ey1 * ex1 + ey2 * ex2
         ey0, ey1, ey2 = ey0 - p * ex0, ey1 - p * ex1, ey2 - p * ex2

@@ -12,7 +12,11 @@ Section frame (Fig. 4; frame definitions in COMMON brief / :mod:`kite_env.frames
     offset of the section nodes from the chord line, oriented like the LE line towards the right tip. Where the
     section is nearly flat (mean offset below 2 % of the chord, the plane is then undefined) ``e_y`` blends smoothly
     into the spanwise tangent of the LE line (central differences of the neighbouring LE nodes, one-sided at the
-    tips), orthogonalised against ``e_x``. The LE tangent alone would be wrong at the strongly curved tips of a
+    tips), orthogonalised against ``e_x``. So it does where that plane is far from the section's, its normal more than 30 deg
+    from the LE tangent (fully at 60 deg): a mean offset along the span, as of the nodes of a slack, wrinkled
+    canopy, spans no airfoil plane, and the orientation of its normal flips where it crosses 90 deg, which without
+    this blend made ``e_y`` and the angle of attack jump (by 12 deg in a sideways-bent section: Newton then cycled
+    between the two sides of the jump; docs/flight_model.md, section 18). The LE tangent alone would be wrong at the strongly curved tips of a
     C-shaped wing, where the section planes are not perpendicular to the LE line (12 deg on the rhino16 tips).
 
 Our reading of the partly garbled equations of Sect. II.B (fragments of the extracted seed text in brackets):
@@ -112,6 +116,10 @@ class SectionGeometry:
 
 #: Mean node offset from the chord line (fraction of the chord) above which e_y is the airfoil-plane normal.
 _FLAT_FRACTION = 0.02
+#: |cos| of the angle between the airfoil-plane normal and the LE tangent: at and above ``_PLANE_COS_FULL`` (30 deg)
+#: e_y is the plane normal, at and below ``_PLANE_COS_NONE`` (60 deg) the LE tangent, smoothstep in between.
+_PLANE_COS_FULL = 0.8660254037844386
+_PLANE_COS_NONE = 0.5
 
 
 def spanwise_directions(r_le: np.ndarray) -> np.ndarray:
@@ -177,10 +185,14 @@ def section_geometry(x_sec: np.ndarray, tube_d: np.ndarray, spanwise: np.ndarray
     h -= dot(h, e_x)[:, None] * e_x
     h_len = np.sqrt(dot(h, h))
     n_pl = cross(h, e_x) / np.maximum(h_len, 1e-300)[:, None]
-    n_pl *= np.where(dot(n_pl, tan) < 0.0, -1.0, 1.0)[:, None]  # oriented towards the right tip like the LE line
+    cos_pl = dot(n_pl, tan)
+    n_pl *= np.where(cos_pl < 0.0, -1.0, 1.0)[:, None]  # oriented towards the right tip like the LE line
     # blend to the LE tangent when the section is nearly flat (plane undefined): weight 1 above 2 % of the chord
     u = np.clip(h_len / (_FLAT_FRACTION * chord_nodes), 0.0, 1.0)
-    wgt = (u * u * (3.0 - 2.0 * u))[:, None]
+    # and when the "plane" is far from the section's (a mean offset along the span, of a slack canopy): the sign
+    # above flips where the normal crosses 90 deg from the LE tangent, so its weight must vanish before that
+    v = np.clip((np.abs(cos_pl) - _PLANE_COS_NONE) / (_PLANE_COS_FULL - _PLANE_COS_NONE), 0.0, 1.0)
+    wgt = (u * u * (3.0 - 2.0 * u) * v * v * (3.0 - 2.0 * v))[:, None]
     ey = wgt * n_pl + (1.0 - wgt) * tan
     ey -= dot(ey, e_x)[:, None] * e_x
     np.divide(ey, np.sqrt(dot(ey, ey))[:, None], out=e_y)

@@ -132,6 +132,8 @@ def both(x, kw, d=D, w=W):
 
 def test_thresholds_and_constants_equal_reference():
     assert kernels._FLAT_FRACTION == sections._FLAT_FRACTION
+    assert kernels._PLANE_COS_FULL == sections._PLANE_COS_FULL
+    assert kernels._PLANE_COS_NONE == sections._PLANE_COS_NONE
     assert kernels._ALPHA_POLY_MAX_DEG == breukels.ALPHA_POLY_MAX_DEG
     assert kernels._ALPHA_FP_MIN_DEG == breukels.ALPHA_FP_MIN_DEG
     assert kernels._X_REF_DEFAULT == breukels.X_REF_OVER_C_DEFAULT == loads.X_REF_OVER_C_DEFAULT

@@ -131,6 +131,46 @@ def test_e_y_towards_right_tip_on_c_arc():
     np.testing.assert_allclose(g.kappa[1:-1], (0.08 * 0.96 * chord_nodes / (chord_nodes + 0.1))[1:-1], rtol=1e-12)
 
 
+def test_e_y_is_continuous_when_the_mean_offset_turns_into_the_span():
+    # A section of a slack canopy whose nodes are displaced sideways: its mean offset from the chord line turns
+    # from the camber direction (e_z) into the span (e_y). The "plane" of chord and offset then contains the span,
+    # and its normal crosses 90 deg from the LE tangent, where its orientation flips. e_y and the angle of attack
+    # must not jump there (a 12 deg jump of alpha made Newton cycle between the two sides; docs section 18).
+    from kite_env.aero.loads import section_loads
+    m, chord, mag = 6, 2.0, 0.01  # mean offset 0.5 % of the chord: a quarter into the flat-section blend
+    s = np.linspace(0.0, chord, m)
+    bump = np.sin(np.pi * s / chord)
+    bump *= mag / bump.mean()
+
+    def section(phi):
+        x = np.zeros((1, m, 3))
+        x[0, :, 0] = s
+        x[0, :, 1] = np.sin(phi) * bump
+        x[0, :, 2] = np.cos(phi) * bump
+        return x
+
+    phis = np.radians(np.linspace(0.0, 180.0, 721))
+    span = np.array([[0.0, 1.0, 0.0]])
+    ey = np.array([section_geometry(section(p), np.full(1, 0.1), spanwise=span).e_y[0] for p in phis])
+    step = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", ey[1:], ey[:-1]), -1.0, 1.0)))
+    assert step.max() < 0.5  # 0.25 deg steps of the offset's direction; before: a 21 deg jump at 90 deg
+    # an offset in the camber direction keeps the plane normal (the tips of a C wing), one along the span gives
+    # the LE tangent, the blend only between 30 and 60 deg
+    near = phis <= np.radians(30.0)
+    n_pl = np.stack([np.zeros(near.sum()), np.cos(phis[near]), -np.sin(phis[near])], axis=1)  # offset x chord
+    w = 0.25**2 * (3.0 - 2.0 * 0.25)  # the flat-section weight of a 0.5 % offset (threshold 2 %)
+    expect = w * n_pl + (1.0 - w) * span
+    np.testing.assert_allclose(ey[near], expect / np.linalg.norm(expect, axis=1)[:, None], atol=1e-13)
+    side = (phis >= np.radians(60.0)) & (phis <= np.radians(120.0))
+    np.testing.assert_allclose(ey[side], np.tile([0.0, 1.0, 0.0], (int(side.sum()), 1)), atol=1e-14)
+    # the compiled kernel and the reference agree, and alpha has no jump either
+    wind = np.array([[20.0, 0.0, 3.0]])
+    alpha = {b: np.array([section_loads(section(p), np.full(1, 0.1), np.full(1, 0.5), np.zeros(3), np.zeros(3),
+                                        wind, 1.225, backend=b).alpha[0] for p in phis]) for b in ("numba", "numpy")}
+    np.testing.assert_allclose(alpha["numba"], alpha["numpy"], atol=1e-12)
+    assert np.max(np.abs(np.diff(np.degrees(alpha["numpy"])))) < 0.5
+
+
 def test_section_order_does_not_change_frames():
     x, *_ = c_wing(n_sec=9)
     d = np.linspace(0.1, 0.2, 9)
