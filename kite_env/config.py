@@ -50,6 +50,11 @@ class StructureConfig:
     # gradient of an energy, not conservative, its tangent 4 % off, and it over-softens an S-bent element: the
     # folding struts of the high-wind random episodes; docs/flight_model.md, sections 15 and 17)
     tube_curvature: str = "element_energy"
+    # fold contact of a kinked tube (kite_env.structure.tube.fold_contact, with element_energy only): from this fold
+    # angle of an element (rms curvature times length) its legs press on each other and the fold closes at 180 deg
+    # instead of passing it (Breukels' collapsed tube is a hinge of no stiffness; the co-rotational element cannot
+    # represent a fold of 180 deg: docs/flight_model.md, section 18); 0 = none (stops before 31) [deg]
+    tube_fold_onset_deg: float = 90.0
     # tip beams ("thin stiff beam", Sect. II.A): a solid glass-fibre rod (modelling choice), diameter from the mesh
     tip_rod_E_Pa: float = 30.0e9  # [Pa]
     # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
@@ -436,6 +441,9 @@ def _validate(cfg: Config) -> None:
                           f"got {cfg.dynamics.wing_point_mass_share}")
     if cfg.control.beta_min > 1.0:
         raise ConfigError(f"config key 'control.beta_min' must lie in [0, 1], got {cfg.control.beta_min}")
+    if not 0.0 <= cfg.structure.tube_fold_onset_deg < 180.0:
+        raise ConfigError("config key 'structure.tube_fold_onset_deg' must lie in [0, 180) (0: no fold contact), "
+                          f"got {cfg.structure.tube_fold_onset_deg}")
     if not 0.0 <= cfg.structure.rho_inf <= 1.0:
         raise ConfigError(f"config key 'structure.rho_inf' must lie in [0, 1], got {cfg.structure.rho_inf}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:

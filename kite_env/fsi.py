@@ -138,6 +138,14 @@ class AeroelasticWing:
         self._tube_rows = np.flatnonzero(self._is_tube)
         EA, EI2, EI3, GJ = (np.zeros(n_b) for _ in range(4))
         self.tube_props = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube])
+        # the conservative law with the fold contact of a kinked tube (structure.tube_fold_onset_deg; the larger-end
+        # law and the continuation through it keep Breukels' law alone)
+        self._tube_props_fold = self.tube_props
+        if s.tube_fold_onset_deg > 0.0:
+            L0_tube = np.linalg.norm(mesh.nodes[mesh.beams[self._is_tube, 1]] - mesh.nodes[mesh.beams[self._is_tube, 0]],
+                                     axis=1)
+            self._tube_props_fold = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube], L0_tube,
+                                                         np.deg2rad(s.tube_fold_onset_deg))
         EA[self._is_tube] = np.pi * d[self._is_tube] * s.tube_wall_Et_N_per_m
         EI2[self._is_tube] = EI3[self._is_tube] = self.tube_props.EI0
         GJ[self._is_tube] = self.tube_props.GJ0
@@ -270,9 +278,9 @@ class AeroelasticWing:
 
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
-        p = self.tube_props
         l, th = self.beams.local_rotations(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
         measure = self.cfg.structure.tube_curvature if self._tube_law is None else self._tube_law
+        p = self._tube_props_fold if measure == "element_energy" else self.tube_props
         # the energy's curvature is per unloaded length; the larger-end law keeps its current chord length (stops
         # before 27: the default flight unchanged)
         L_k = self.beams.L0 if measure == "element_energy" else l
@@ -280,8 +288,8 @@ class AeroelasticWing:
             n_t = self._tube_rows.size
             EI, GJ, gb, gt = (np.empty(n_t) for _ in range(4))
             col = np.empty(n_t, dtype=np.bool_)
-            tube_secants(th, L_k, self._tube_rows, p.EI0, p.M_max, p.kappa_collapse, p.GJ0, p.c2,
-                         measure == "element_energy", material_tangent, EI, GJ, col, gb, gt)
+            tube_secants(th, L_k, self._tube_rows, p.EI0, p.M_max, p.kappa_collapse, p.GJ0, p.c2, p.kappa_fold,
+                         p.kappa_closed, measure == "element_energy", material_tangent, EI, GJ, col, gb, gt)
         else:
             th1, th2, L0 = th[tb, 0], th[tb, 1], L_k[tb]
             kappa = tube.element_curvature(th1, th2, L0, measure)
@@ -309,7 +317,7 @@ class AeroelasticWing:
         L0 = b.L0[tb]
         kappa = tube.element_curvature(th[tb, 0], th[tb, 1], L0)
         phi = np.abs(th[tb, 1, 0] - th[tb, 0, 0]) / L0
-        u_tube = L0 * (tube.bending_energy_density(self.tube_props, kappa)
+        u_tube = L0 * (tube.bending_energy_density(self._tube_props_fold, kappa)
                        + tube.torsion_energy_density(self.tube_props, phi)) + 0.5 * b.EA[tb] / L0 * (l[tb] - L0) ** 2
         u_rest = b.energy(xb, Rb)[~tb]
         return float(u_tube.sum() + u_rest.sum() + self.shells.energy(state.x[m.shells], state.Rn[m.shells]).sum())

@@ -227,8 +227,8 @@ def test_bad_input_rejected():
 
 def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
     """The tube-stiffness update of every iteration: the compiled loop (tube_secants) against the NumPy lines, at
-    the loaded state and at a strongly deformed copy of it (secants far from the initial stiffness, some tubes
-    beyond the collapse curvature)."""
+    the loaded state and at strongly deformed copies of it (secants far from the initial stiffness, some tubes
+    beyond the collapse curvature; some folded beyond the fold contact's onset)."""
     from kite_env.structure.rotations import expm
 
     wing = nominal[0]
@@ -238,10 +238,12 @@ def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
     loaded = wing.state.copy()
     bent = wing.state.copy()
     bent.Rn[:] = expm(0.3 * np.random.default_rng(2).normal(size=bent.x.shape)) @ bent.Rn
+    folded = wing.state.copy()  # end rotations of about a radian: some tubes in the fold contact
+    folded.Rn[:] = expm(1.0 * np.random.default_rng(3).normal(size=folded.x.shape)) @ folded.Rn
     saved = (beams.EI2.copy(), beams.EI3.copy(), beams.GJ.copy(), beams._k11.copy(), beams._k12.copy(),
              beams._kmat.copy())
     try:
-        for state in (loaded, bent):
+        for state in (loaded, bent, folded):
             out = {}
             for backend in ("numba", "numpy"):
                 beams.backend = backend
@@ -251,7 +253,9 @@ def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
             np.testing.assert_allclose(out["numba"][1], out["numpy"][1], rtol=1e-12)
             np.testing.assert_array_equal(out["numba"][2], out["numpy"][2])
             np.testing.assert_allclose(out["numba"][3], out["numpy"][3], rtol=1e-9, atol=1e-300)
-        assert np.any(out["numba"][2]) and np.min(out["numba"][0][wing._tube_rows] / wing.tube_props.EI0) < 0.5
+            if state is bent:
+                assert np.any(out["numba"][2]) and np.min(out["numba"][0][wing._tube_rows] / wing.tube_props.EI0) < 0.5
+        assert np.any(out["numba"][3][wing._tube_rows, 0] > 0.0)  # g_b > 0: a fold contact stiffens
     finally:
         beams.backend = "numba"
         beams.EI2[:], beams.EI3[:], beams.GJ[:], beams._k11[:], beams._k12[:], beams._kmat[:] = saved

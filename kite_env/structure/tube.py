@@ -23,12 +23,14 @@ the element's root-mean-square curvature makes the secant law the gradient of th
 elastic and their tangent (:func:`secant_material_terms`) is exact; the default, the larger end curvature, is not
 a gradient (docs/flight_model.md, section 15). Collapse (local wrinkling through the tube) is flagged when the
 equivalent cantilever deflection ``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the
-post-collapse state.
+post-collapse state. Beyond it the law is a hinge of constant moment ``M_max``, and nothing in it stops a fold: the
+fold contact of :func:`fold_contact` (``structure.tube_fold_onset_deg``) closes a kinked element's fold at pi, where
+its legs meet (docs/flight_model.md, section 18).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,7 +54,9 @@ class TubeProperties:
 
     Attributes (all ``(n,)`` float): ``M_max`` [N m] limit bending moment, ``EI0`` [N m^2] initial bending
     stiffness, ``kappa_collapse`` [1/m] curvature at collapse, ``c1`` [N m], ``c2`` [m/rad] torsion constants,
-    ``GJ0`` [N m^2] initial torsion stiffness.
+    ``GJ0`` [N m^2] initial torsion stiffness; ``kappa_fold``, ``kappa_closed`` [1/m] the element curvatures at
+    which the fold contact of a kinked tube sets in and at which the fold closes (:func:`fold_contact`; infinite:
+    none, Breukels' law alone).
     """
 
     M_max: np.ndarray
@@ -61,10 +65,24 @@ class TubeProperties:
     c1: np.ndarray
     c2: np.ndarray
     GJ0: np.ndarray
+    kappa_fold: np.ndarray = field(default=None)
+    kappa_closed: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        inf = np.full(np.shape(self.M_max), np.inf)
+        if self.kappa_fold is None:
+            object.__setattr__(self, "kappa_fold", inf)
+        if self.kappa_closed is None:
+            object.__setattr__(self, "kappa_closed", inf.copy())
 
 
-def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray) -> TubeProperties:
+def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray, element_length_m=None,
+                    fold_onset_rad: float | None = None) -> TubeProperties:
     """Evaluate Breukels' correlations for tubes of diameter ``diameter_m`` [m] at gauge pressure ``pressure_pa`` [Pa].
+
+    With ``element_length_m`` (the beam elements' unloaded lengths, (n,) [m]) and ``fold_onset_rad`` the elements
+    get the fold contact of :func:`fold_contact`: it sets in at the fold angle ``fold_onset_rad`` (the element's
+    rms curvature times its length) and closes the fold at pi; without them Breukels' law alone.
 
     Raises ``ValueError`` where the fit gives a non-physical (non-positive) stiffness or strength: Breukels' fits
     degrade for small tubes (C2, C8 < 0; physics_facts 2.4), and silently clipping would hide that.
@@ -91,6 +109,13 @@ def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray) -> 
             f"torsion c1 {c1.ravel()[i]:.3g}, c2 {c2.ravel()[i]:.3g}); the fits are calibrated for ~0.1-0.3 m tubes at 0.1-1 bar"
         )
     EI0 = N * L_CAL**3 / 3.0  # cantilever: v = P L^3 / (3 EI)
+    k_fold = k_closed = None
+    if element_length_m is not None and fold_onset_rad is not None:
+        L = np.broadcast_to(np.asarray(element_length_m, dtype=float), D.shape)
+        if np.any(L <= 0.0) or not 0.0 < fold_onset_rad < np.pi:
+            raise ValueError(f"fold contact: element lengths must be positive and the onset fold angle within "
+                             f"(0, pi) rad, got {np.min(L):g} m and {fold_onset_rad:g} rad")
+        k_fold, k_closed = fold_onset_rad / L, np.pi / L
     return TubeProperties(
         M_max=D * L_CAL,
         EI0=EI0,
@@ -98,13 +123,52 @@ def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray) -> 
         c1=c1,
         c2=c2,
         GJ0=c1 * c2,
+        kappa_fold=k_fold,
+        kappa_closed=k_closed,
     )
+
+
+#: share of the span from the fold contact's onset to its closure beyond which the contact moment is continued
+#: linearly (C1): the law stays finite for a Newton iterate beyond the closure
+_FOLD_LINEAR = 0.9
+
+
+def fold_contact(props: TubeProperties, kappa: np.ndarray):
+    """Contact moment of a kinked tube whose fold closes, its derivative and its energy per length, each (n,).
+
+    Breukels' law saturates at ``M_max``: a collapsed tube is a hinge of no stiffness (Breukels 2011, ch. 3), and
+    nothing stops its fold. A real fold stops when its two legs meet: a kinked tube folded by pi lies on itself
+    (and the co-rotational element, whose frame is the mean of its end triads, cannot represent a fold of pi:
+    :mod:`kite_env.structure.beam`). Modelling choice (no measured law of a closing fold is public): from the fold
+    angle ``Delta_c`` (``kappa_fold`` times the length) the legs press on each other with the moment
+    ``M_c = M_max (x / (a - x))^2``, ``x = kappa - kappa_fold``, ``a = kappa_closed - kappa_fold``: 0 with zero slope
+    at the onset, ``M_max`` half-way, unbounded as the fold closes (``kappa_closed = pi / L0``), continued linearly
+    from ``x = 0.9 a``. Its energy per length is ``M_max (a x / (a - x) + x + 2 a ln(1 - x / a))`` (the integral of
+    ``M_c``), so the law stays the gradient of a stored energy. Returns ``(M_c, dM_c/dkappa, W_c)`` at ``|kappa|``."""
+    k = np.abs(np.asarray(kappa, dtype=float))
+    kf, kc = np.broadcast_arrays(props.kappa_fold, props.kappa_closed)
+    finite = np.isfinite(kf)
+    kf0 = np.where(finite, kf, 0.0)
+    a = np.where(finite, kc, 1.0) - kf0
+    x = np.where(finite, np.maximum(k - kf0, 0.0), 0.0)
+    xe = _FOLD_LINEAR * a
+    xi = np.minimum(x, xe)
+    u = a - xi
+    Mm = props.M_max
+    M = Mm * (xi / u) ** 2
+    dM = Mm * 2.0 * xi * a / u**3
+    W = Mm * (a * xi / u + xi + 2.0 * a * np.log1p(-xi / a))
+    beyond = np.maximum(x - xe, 0.0)
+    W = W + M * beyond + 0.5 * dM * beyond**2
+    M = M + dM * beyond
+    return M, dM, W
 
 
 def bending_moment(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
     """Bending moment [N m] at curvature ``kappa`` [1/m] (odd in kappa)."""
     k = np.asarray(kappa, dtype=float)
-    return np.sign(k) * props.M_max * (1.0 - np.exp(-props.EI0 * np.abs(k) / props.M_max))
+    return np.sign(k) * (props.M_max * (1.0 - np.exp(-props.EI0 * np.abs(k) / props.M_max))
+                         + fold_contact(props, k)[0])
 
 
 def torque(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
@@ -113,12 +177,14 @@ def torque(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
 
 
 def secant_EI(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
-    """Secant bending stiffness ``M(kappa)/kappa`` [N m^2]; equals ``EI0`` as ``kappa -> 0``."""
+    """Secant bending stiffness ``M(kappa)/kappa`` [N m^2] (with the fold contact, :func:`fold_contact`); equals
+    ``EI0`` as ``kappa -> 0``."""
     k = np.abs(np.asarray(kappa, dtype=float))
     x = props.EI0 * k / props.M_max
     # (1 - exp(-x)) / x with its series for small x
     ratio = np.where(x < 1e-6, 1.0 - 0.5 * x, -np.expm1(-np.maximum(x, 1e-300)) / np.maximum(x, 1e-300))
-    return props.EI0 * ratio
+    M_c = fold_contact(props, k)[0]
+    return props.EI0 * ratio + np.where(M_c > 0.0, M_c / np.maximum(k, 1e-300), 0.0)
 
 
 def secant_GJ(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
@@ -166,8 +232,9 @@ def secant_material_terms(props: TubeProperties, kappa: np.ndarray, phi: np.ndar
     unit EI) with ``kappa^2 = theta^T A theta / L0``, so ``dm/dtheta = EI_s A + g_b m m^T`` with
     ``g_b = (EI_t - EI_s) / (kappa^2 L0 EI_s^2)``, ``EI_t = dM/dkappa = EI0 exp(-EI0 kappa / M_max)`` the tangent
     stiffness; likewise ``g_t = (GJ_t - GJ_s) / (phi^2 L0 GJ_s^2)`` with ``GJ_t = dT/dphi = c1 c2 / (1 + (c2 phi)^2)``.
-    Both are <= 0 (the law softens) and the full element tangent is positive semi-definite. Returns
-    ``(g_b, g_t)`` [1/(N m)], 0 where the element is undeformed."""
+    Both are <= 0 where the law softens; the fold contact (:func:`fold_contact`) adds ``dM_c/dkappa - M_c/kappa``
+    to ``EI_t - EI_s`` and makes ``g_b`` positive where it stiffens. Returns ``(g_b, g_t)`` [1/(N m)], 0 where the
+    element is undeformed."""
     k = np.abs(np.asarray(kappa, dtype=float))
     f = np.abs(np.asarray(phi, dtype=float))
     L0 = np.asarray(L0, dtype=float)
@@ -177,17 +244,21 @@ def secant_material_terms(props: TubeProperties, kappa: np.ndarray, phi: np.ndar
     dx = np.where(x < 1e-4, -0.5 * x + x**2 / 3.0 - x**3 / 8.0, np.exp(-xs) + np.expm1(-xs) / xs)
     dy = np.where(y < 1e-4, -2.0 * y**2 / 3.0 + 4.0 * y**4 / 5.0, 1.0 / (1.0 + y**2) - np.arctan(ys) / ys)
     EIs, GJs = secant_EI(props, k), secant_GJ(props, f)
-    g_b = np.where(x > 1e-12, props.EI0 * dx / (np.maximum(k, 1e-300) ** 2 * L0 * EIs**2), 0.0)
+    M_c, dM_c, _ = fold_contact(props, k)
+    ks = np.maximum(k, 1e-300)
+    num = props.EI0 * dx + np.where(M_c > 0.0, dM_c - M_c / ks, 0.0)  # EI_t - EI_s
+    g_b = np.where(x > 1e-12, num / (ks**2 * L0 * EIs**2), 0.0)
     g_t = np.where(y > 1e-12, props.GJ0 * dy / (np.maximum(f, 1e-300) ** 2 * L0 * GJs**2), 0.0)
     return g_b, g_t
 
 
 def bending_energy_density(props: TubeProperties, kappa: np.ndarray) -> np.ndarray:
     """Stored bending energy per length [J/m], ``W(kappa) = int_0^|kappa| M(s) ds``
-    ``= M_max (|kappa| - (M_max / EI0) (1 - exp(-EI0 |kappa| / M_max)))``."""
+    ``= M_max (|kappa| - (M_max / EI0) (1 - exp(-EI0 |kappa| / M_max)))`` plus the fold contact's
+    (:func:`fold_contact`)."""
     k = np.abs(np.asarray(kappa, dtype=float))
     r = props.M_max / props.EI0
-    return props.M_max * (k + r * np.expm1(-k / r))
+    return props.M_max * (k + r * np.expm1(-k / r)) + fold_contact(props, k)[2]
 
 
 def torsion_energy_density(props: TubeProperties, phi: np.ndarray) -> np.ndarray:

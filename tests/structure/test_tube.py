@@ -86,10 +86,41 @@ def test_element_curvature_measures():
         tube.element_curvature(th1, th1, np.array([0.5]), "mean")
 
 
-def _tube_chain(measure):
+def _fold_props(onset=np.pi / 2):
+    return tube.tube_properties(0.3e5, np.array([0.16]), np.array([0.2655]), onset)
+
+
+def test_fold_contact_leaves_breukels_law_below_its_onset_and_closes_the_fold_at_pi():
+    pr, bare = _fold_props(), tube.tube_properties(0.3e5, np.array([0.16]))
+    L0, Mm = 0.2655, pr.M_max[0]
+    k_on, k_pi = (np.pi / 2) / L0, np.pi / L0
+    below = np.array([1e-3, 0.5, 2.0, 0.999 * k_on])
+    np.testing.assert_array_equal(tube.bending_moment(pr, below), tube.bending_moment(bare, below))
+    np.testing.assert_array_equal(tube.bending_energy_density(pr, below), tube.bending_energy_density(bare, below))
+    M_c, dM_c, W_c = tube.fold_contact(pr, np.array([k_on, 0.5 * (k_on + k_pi)]))
+    assert M_c[0] == 0.0 and dM_c[0] == 0.0 and W_c[0] == 0.0  # sets in with zero slope
+    assert M_c[1] == pytest.approx(Mm, rel=1e-12)  # M_max half-way to the closure
+    # grows without bound towards the closure, then linearly (finite for an iterate beyond pi)
+    k = np.linspace(k_on, 1.2 * k_pi, 400)
+    M = tube.fold_contact(pr, k)[0]
+    assert np.all(np.diff(M) > 0.0) and np.all(np.isfinite(M))
+    assert tube.fold_contact(pr, np.array([0.99 * k_pi]))[0][0] > 50 * Mm
+    # the contact's energy integrates its moment (C1 at the onset and at the start of the linear part)
+    for kk in (1.01 * k_on, 0.5 * (k_on + k_pi), k_on + 0.89 * (k_pi - k_on), k_on + 0.91 * (k_pi - k_on), 1.1 * k_pi):
+        h = 1e-7 * kk
+        dW = (tube.fold_contact(pr, np.array([kk + h]))[2] - tube.fold_contact(pr, np.array([kk - h]))[2]) / (2 * h)
+        assert dW[0] == pytest.approx(tube.fold_contact(pr, np.array([kk]))[0][0], rel=1e-6)
+        dM = (tube.fold_contact(pr, np.array([kk + h]))[0] - tube.fold_contact(pr, np.array([kk - h]))[0]) / (2 * h)
+        assert dM[0] == pytest.approx(tube.fold_contact(pr, np.array([kk]))[1][0], rel=1e-6)
+    with pytest.raises(ValueError, match="fold contact"):
+        tube.tube_properties(0.3e5, np.array([0.16]), np.array([0.2655]), np.pi)
+
+
+def _tube_chain(measure, fold_onset=None):
     """Four tube elements of a bent, twisted inflated tube (0.3 bar, 0.16-0.2 m) at a strongly deformed state,
     the secant law evaluated there: ``(beams, props, x_e, R_e, update)`` with ``update(x_e, R_e)`` setting the
-    secant stiffness (and, for ``element_energy``, its material tangent terms) of a state."""
+    secant stiffness (and, for ``element_energy``, its material tangent terms) of a state. ``fold_onset`` [rad]:
+    with the fold contact from that element fold angle."""
     from kite_env.structure.beam import BeamSet
     from kite_env.structure.rotations import expm
 
@@ -97,7 +128,8 @@ def _tube_chain(measure):
     s = np.linspace(0.0, 1.6, 5)
     X = np.stack([s, 0.3 * np.sin(s), 0.1 * s**2], axis=1)
     conn = np.stack([np.arange(4), np.arange(1, 5)], axis=1)
-    props = tube.tube_properties(0.3e5, np.linspace(0.16, 0.2, 4))
+    L0 = np.linalg.norm(X[1:] - X[:-1], axis=1)
+    props = tube.tube_properties(0.3e5, np.linspace(0.16, 0.2, 4), None if fold_onset is None else L0, fold_onset)
     bs = BeamSet(conn, X, [0.0, 0.0, 1.0], 3e4, props.EI0, props.EI0, props.GJ0, backend="numpy")
     x = X + 0.03 * rng.normal(size=X.shape)
     R = expm(0.25 * rng.normal(size=X.shape))  # curvatures up to ~1/m: secants well below EI0
@@ -153,16 +185,21 @@ def test_secant_tube_forces_are_the_gradient_of_a_stored_energy_only_with_the_el
         assert err > 1e-3
 
 
+@pytest.mark.parametrize("fold", [False, True])
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_secant_tube_tangent_is_consistent(backend):
+def test_secant_tube_tangent_is_consistent(backend, fold):
     # with the material terms g m m^T the element tangent is the exact derivative of its forces (the secant alone
-    # missed 4 % of the rotational columns at a flight state)
+    # missed 4 % of the rotational columns at a flight state); with the fold contact set in at 0.1 rad here, so
+    # that elements of this chain are in it, the contact stiffens them (g_b > 0) and the tangent stays exact
     pytest.importorskip("numba") if backend == "numba" else None
-    bs, props, x_e, R_e, update = _tube_chain("element_energy")
+    bs, props, x_e, R_e, update = _tube_chain("element_energy", 0.1 if fold else None)
     bs.backend = backend
-    update(x_e, R_e)
+    k = update(x_e, R_e)[0]
     f, K = bs.internal(x_e, R_e)
-    assert np.all(bs._kmat[:, 0] < 0.0) and np.all(bs._kmat[:, 1] < 0.0)
+    if fold:
+        assert np.any(tube.fold_contact(props, k)[0] > 0.0) and np.any(bs._kmat[:, 0] > 0.0)
+    else:
+        assert np.all(bs._kmat[:, 0] < 0.0) and np.all(bs._kmat[:, 1] < 0.0)
     h = 1e-6
     Kfd = np.empty_like(K)
     for j in range(12):
