@@ -41,6 +41,10 @@ def test_overrides_and_errors(tmp_path):
     assert load_config(overrides=["aero.cm_regression_ref_over_c=0"]).aero.cm_regression_ref_over_c == 0.0
     with pytest.raises(ConfigError, match="'aero.cm_regression_ref_over_c' must lie in"):
         load_config(overrides=["aero.cm_regression_ref_over_c=1.5"])
+    assert load_config(overrides=["structure.tube_fold_onset_deg=0"]).structure.tube_fold_onset_deg == 0.0
+    for bad in ("180", "-5"):
+        with pytest.raises(ConfigError, match="'structure.tube_fold_onset_deg' must lie in"):
+            load_config(overrides=[f"structure.tube_fold_onset_deg={bad}"])
 
 
 def test_kite_frame_orthonormal_right_handed_and_definition():
