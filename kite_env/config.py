@@ -71,8 +71,9 @@ class StructureConfig:
     # rotary inertia of the wing's nodes (dynamic wing): this factor times the second moment of each node's
     # tributary rectangle (chordwise a, spanwise b) about the node, J = m (a^2 + b^2) / 24, the mean of its two
     # in-plane axes (lumped rotary inertia as in the HRZ lumping of Hinton, Rock & Zienkiewicz 1976, which gives a
-    # uniform beam's node m l^2 / 39); 0 = massless, quasi-static rotations [-]
-    rotary_inertia_factor: float = 0.0
+    # uniform beam's node m l^2 / 39); 0 = massless, quasi-static rotations (the default before stop 31: a slack canopy's
+    # trailing-edge rotations then had nothing to hold them, docs/flight_model.md, section 18) [-]
+    rotary_inertia_factor: float = 1.0
     # structural damping of the wing with inertia: stiffness-proportional (Rayleigh) C = beta K_T on the nodal
     # translations, beta = 2 zeta / omega_ref: 2 % of critical at 10 Hz, the level of the paper's relative damping
     # coefficients of the wing (Table 1: 0.015-0.02); 0 = none [s]
