@@ -138,14 +138,6 @@ class AeroelasticWing:
         self._tube_rows = np.flatnonzero(self._is_tube)
         EA, EI2, EI3, GJ = (np.zeros(n_b) for _ in range(4))
         self.tube_props = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube])
-        # the conservative law with the fold contact of a kinked tube (structure.tube_fold_onset_deg; the larger-end
-        # law and the continuation through it keep Breukels' law alone)
-        self._tube_props_fold = self.tube_props
-        if s.tube_fold_onset_deg > 0.0:
-            L0_tube = np.linalg.norm(mesh.nodes[mesh.beams[self._is_tube, 1]] - mesh.nodes[mesh.beams[self._is_tube, 0]],
-                                     axis=1)
-            self._tube_props_fold = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube], L0_tube,
-                                                         np.deg2rad(s.tube_fold_onset_deg))
         EA[self._is_tube] = np.pi * d[self._is_tube] * s.tube_wall_Et_N_per_m
         EI2[self._is_tube] = EI3[self._is_tube] = self.tube_props.EI0
         GJ[self._is_tube] = self.tube_props.GJ0
@@ -162,6 +154,12 @@ class AeroelasticWing:
         EI3[te] = np.maximum(EI3[te], s.te_hem_EI_Nm2)
         GJ[te] = np.maximum(GJ[te], s.te_hem_EI_Nm2 / (1.0 + _NU_ROD))
         self.beams = BeamSet(mesh.beams, mesh.nodes, mesh.beam_up, EA, EI2, EI3, GJ)
+        # the conservative law with the fold contact of a kinked tube (structure.tube_fold_onset_deg; the larger-end
+        # law and the continuation through it keep Breukels' law alone)
+        self._tube_props_fold = self.tube_props
+        if s.tube_fold_onset_deg > 0.0:
+            self._tube_props_fold = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube],
+                                                         self.beams.L0[self._is_tube], np.deg2rad(s.tube_fold_onset_deg))
         self.shells = ShellSet(mesh.shells, mesh.nodes, s.canopy_E_Pa, s.canopy_nu, s.canopy_thickness_m,
                                wrinkling=s.wrinkling)
         self.assembler = Assembler(mesh.n_nodes, [self.beams, self.shells])

@@ -39,6 +39,8 @@ import os
 
 import numpy as np
 
+from .tube import _FOLD_LINEAR  # the fold contact's linear continuation (a compile-time constant here)
+
 try:  # numba is a declared dependency; the fallback keeps the package importable without it
     from numba import njit
 
@@ -229,8 +231,6 @@ def beam_local_rotations(x_e, R_e, R0, l_out, th_out):
 
 #: below this normalised curvature / twist the material tangent terms of the secant law are 0 (m = 0 there)
 _SECANT_TINY = 1e-12
-#: the fold contact's linear continuation (tube._FOLD_LINEAR)
-_FOLD_LINEAR = 0.9
 
 
 @njit(**_JIT)
