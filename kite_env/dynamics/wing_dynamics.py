@@ -123,7 +123,7 @@ class _StepLoad:
     the reference inflow (its load change spread by the moment law, one step behind) drives the 3 Hz yaw/twist mode.
     """
 
-    def __init__(self, dyn: WingDynamics, dt: float, r_kcu, v_kcu, rest, g_K, v_wind):
+    def __init__(self, dyn: WingDynamics, dt: float, r_kcu, v_kcu, rest, g_K, v_wind, at: NodalState | None = None):
         self.dyn, self.dt = dyn, dt
         p = dyn.alpha
         self.c_a = 1.0 / (p.beta * dt * dt)  # d a / d x
@@ -145,11 +145,21 @@ class _StepLoad:
         self.line = None
         # the canopy's membrane forces of the step start (energy-consistent membrane forces, dyn.membrane_forces)
         self.f_m0 = dyn.membrane_force(dyn.state.x) if dyn.energy_consistent_membrane else None
-        # held over the step: the sampling weights, the rigid-body inflow and the section damping at the start
+        # held over the step: the sampling weights, the rigid-body inflow, the section damping and the structural
+        # damping's tangent. They are evaluated where the step ends, not where it starts: at ``at``, the Newton start
+        # (the last change of shape repeated, second-order close to the step's end), and with the rigid translation
+        # of the Newmark estimate ``v_n + dt a_n`` of the end velocities. Held at the step's start, each of them lags
+        # the forces of the step's end (where generalized-alpha takes them) by one step, a first-order error: the KCU
+        # of the 10 s baseline then drifted 39 cm along the path at dt = 10 ms against 5 ms (2.5 ms: 19.5 cm), the
+        # mean traction +0.34 % (-0.27 %); with the end-of-step evaluation 3.0 cm and 2.1 cm, -0.02 % and -0.02 %
+        # (docs/flight_model.md, section 19)
         wing, mesh = dyn.wing, dyn.wing.mesh
-        x_sec0 = dyn.state.x[mesh.sections]
+        at = dyn.state if at is None else at
+        x_sec0 = at.x[mesh.sections]
         self.W = dyn.section_weights(x_sec0)
         V, w = dyn.rigid_velocity()
+        if at is not dyn.state:
+            V = V + dt * dyn.rigid_velocity(dyn.a)[0]  # (the rigid fit is linear in the velocities)
         # the reference inflow is the wing's rigid translation only: its rotation (yaw, roll, pitch rates) enters,
         # with the deformation, through the dissipative deviation damping. Taken into the reference (each
         # section's load at the inflow of V + omega x r_p, held over the step, its change spread by the moment law
@@ -165,7 +175,7 @@ class _StepLoad:
         self.K0 = None
         if self.beta_K > 0.0:
             asm = wing._mono_solvers["prescribed"].asm
-            _, kd = asm.assemble_data(dyn.state.x, dyn.state.Rn, tangent=True)
+            _, kd = asm.assemble_data(at.x, at.Rn, tangent=True)
             self.K0_data = self.beta_K * kd * dyn.tt_mask
             self.K0 = asm.matrix(self.K0_data)
             self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
@@ -378,14 +388,16 @@ class WingDynamics:
         m = x_sec.shape[1]
         return 1.0 / m + ds * ((s_p - s.mean(axis=1)) / np.einsum("ij,ij->i", ds, ds))[:, None]
 
-    def update_mass(self) -> None:
-        """Nodal mass blocks (n_nodes, 3, 3) [kg] at the current shape: structural mass plus the sections' added
-        mass along their normals (held over a step)."""
+    def update_mass(self, x: np.ndarray | None = None) -> None:
+        """Nodal mass blocks (n_nodes, 3, 3) [kg] at the shape ``x`` (n_nodes, 3) [m] (default: the current one):
+        structural mass plus the sections' added mass along their normals (held over a step). A step takes them at
+        its predicted end: the normals turn with the wing, and the added mass (about 1.5 times the wing's own along
+        the normals) held at the step's start lags its inertial force by one step."""
         wing, mesh = self.wing, self.wing.mesh
         M = self.m_node[:, None, None] * np.eye(3)[None]
         f = wing.cfg.structure.added_mass_factor
         if f > 0.0:
-            x_sec = self.state.x[mesh.sections]
+            x_sec = (self.state.x if x is None else x)[mesh.sections]
             geom = section_geometry(x_sec, mesh.section_tube_d)
             m_a = added_mass(mesh, geom, wing.cfg.aero.rho_kg_m3, f, wing.aspect_ratio)
             seg = np.linalg.norm(np.diff(x_sec, axis=1), axis=2)
@@ -449,9 +461,9 @@ class WingDynamics:
         :class:`WingConvergenceError` and leaves the state as it was when Newton fails."""
         wing = self.wing
         fcfg = wing.cfg.fsi
-        self.update_mass()
-        load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind)
         start = self._predict(dt)
+        self.update_mass(start.x)
+        load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=start)
         history: list[dict] = []
         res = None
         for attempt in range(2):
@@ -505,10 +517,12 @@ class WingDynamics:
         Rn = D @ st.Rn
         return NodalState(st.x + r * (st.x - prev.x), 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
 
-    def rigid_velocity(self) -> tuple[np.ndarray, np.ndarray]:
-        """Mass-weighted least-squares rigid-body fit of the nodal velocities: ``(V, omega)`` with the velocity field
-        ``V + omega x x`` (structural masses; frame of the step)."""
-        m, x, v = self.m_node, self.state.x, self.v
+    def rigid_velocity(self, v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Mass-weighted least-squares rigid-body fit of the nodal velocities ``v`` (n_nodes, 3) (default: the
+        current ones) at the current positions: ``(V, omega)`` with the velocity field ``V + omega x x`` (structural
+        masses; frame of the step)."""
+        m, x = self.m_node, self.state.x
+        v = self.v if v is None else v
         M = m.sum()
         c = (m @ x) / M
         vc = (m @ v) / M

@@ -1,7 +1,7 @@
 """The wing with inertia (structure.dynamic, kite_env/dynamics/wing_dynamics.py): what holds so far.
 
-The option is not the default: the dynamic wing does not yet fly the baseline (docs/flight_model.md, section 12).
-These tests check the integrator's pieces and the linearised wing at the start of a flight.
+The option is not the default (docs/flight_model.md, sections 12-19). These tests check the integrator's pieces,
+the linearised wing at the start of a flight and short flights.
 """
 
 import dataclasses
@@ -264,8 +264,10 @@ def test_energy_over_1000_steps_without_dissipation(membrane_forces):
     as an energy, so the conservative tube law, structure.tube_curvature = element_energy, is needed). With the
     canopy's membrane forces as the discrete gradient of their energy, it is kept to 2e-6 of E0 (E0 is mostly the wing's translation; the
     deformation's energy is about 0.3 J, the drift 4e-3 J). Generalized-alpha's averaged end forces are not
-    energy-consistent for the membrane's geometric nonlinearity: at step 680 the energy starts to grow and Newton
-    fails at step 695. The canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the
+    energy-consistent for the membrane's geometric nonlinearity: their energy error is 7-13 % of the deformation's
+    energy (0.022-0.044 J), or, once it starts to grow, Newton fails (at step 695 with the step's held quantities at
+    its start, before stop 32; whether and when that growth starts depends on round-off: with the air density of
+    this vacuum at 2e-12 instead of 1e-12 kg/m^3 the same code ran the 1000 steps with 0.022 J). The canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the
     averaged forces gain 75 % of E0 within 0.3 s, and the discrete gradient's Newton iteration does not converge
     on a canopy that is slack all over (docs/flight_model.md, section 15)."""
     d, step, _ = _free_wing(1.0, wrinkling=False, membrane_forces=membrane_forces, tube_curvature="element_energy")
@@ -286,7 +288,7 @@ def test_energy_over_1000_steps_without_dissipation(membrane_forces):
         assert U_max > 0.05  # the wing deforms (J)
         assert drift < 1e-5 * E0 and drift < 0.05 * U_max, (drift, U_max, E0)
     else:
-        assert failed is not None or drift > 1e-3 * E0
+        assert failed is not None or drift > 0.03 * U_max, (failed, drift, U_max)
 
 
 @pytest.mark.parametrize("rayleigh", [True, False], ids=["flight_damping", "no_structural_damping"])
@@ -375,6 +377,27 @@ def test_dynamic_wing_flies_the_baseline_with_taut_steering_lines():
     assert np.degrees(alpha[:, [0, -1]]).min() > 0.0  # the tips stay loaded in this turn
     head = [np.arctan2(*(-r.R_wk[:, 0])[[1, 2]]) for r in recs]
     assert abs(head[-1] - head[0]) > np.radians(30.0)  # it turns
+
+
+def test_the_dynamic_flight_does_not_depend_on_the_time_step():
+    """Issue 19's time-step check with the wing with inertia: the baseline at dt = 10 ms against 5 ms. The step's
+    held quantities (reference inflow, section damping, added mass, structural damping) are taken at the step's
+    predicted end, where generalized-alpha takes the forces; held at its start they lag by one step and the KCU
+    drifted along the path at first order (17 cm after 4 s, 39 cm after 8 s; now 1 cm and 2.5 cm;
+    docs/flight_model.md, section 19)."""
+    runs = {}
+    for dt in (0.005, 0.01):
+        base = Config()
+        cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True),
+                                  dynamics=dataclasses.replace(base.dynamics, dt_s=dt))
+        _, recs = _baseline_flight(cfg, 5.0)
+        runs[dt] = {round(r.t, 6): r for r in recs}
+    common = sorted(set(runs[0.005]) & set(runs[0.01]))
+    assert len(common) == 500
+    gap = [np.linalg.norm(runs[0.005][t].state.r[4] - runs[0.01][t].state.r[4]) for t in common]
+    assert max(gap) < 0.05, max(gap)
+    F = [np.mean([runs[dt][t].tether_force for t in common if t > 1.0]) for dt in (0.005, 0.01)]
+    assert F[1] == pytest.approx(F[0], rel=0.01)
 
 
 def test_held_steering_turns_and_the_yaw_twist_oscillation_decays():
