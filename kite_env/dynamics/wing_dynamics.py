@@ -58,6 +58,7 @@ from kite_env.aero.sections import section_geometry
 from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
+from kite_env.structure.kernels import relative_rotation_vectors
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
@@ -170,14 +171,13 @@ class _StepLoad:
         self.inflow = self.v_wind - V  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
                                  self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
-        # structural (Rayleigh) damping beta K_T(x_n) on the translations, of the motion relative to the rigid one
+        # structural (Rayleigh) damping beta K_T(x) on the translations, of the motion relative to the rigid one; its
+        # tangent is the structure's at the first iterate of the step, ``at`` (the Newton start), assembled in the
+        # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
         self.K0 = None
+        self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
-            asm = wing._mono_solvers["prescribed"].asm
-            _, kd = asm.assemble_data(at.x, at.Rn, tangent=True)
-            self.K0_data = self.beta_K * kd * dyn.tt_mask
-            self.K0 = asm.matrix(self.K0_data)
             self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
 
     def kinematics(self, st: NodalState):
@@ -186,7 +186,10 @@ class _StepLoad:
 
     def rotation_kinematics(self, st: NodalState):
         """Angular accelerations and velocities (n_nodes, 3) [rad/s^2, rad/s] of the iterate's rotations."""
-        th = logm(np.einsum("nij,nkj->nik", st.Rn, self.R_n))
+        if self.dyn.compiled:
+            th = relative_rotation_vectors(st.Rn, self.R_n, np.empty((len(st.Rn), 3)))
+        else:
+            th = logm(np.einsum("nij,nkj->nik", st.Rn, self.R_n))
         aw = (th - self.th_pred) * self.c_a
         return aw, self.w_pred + self.dt * self.dyn.alpha.gamma * aw
 
@@ -207,6 +210,12 @@ class _StepLoad:
         mesh = wing.mesh
         a, v = self.kinematics(st)
         self.collapsed = wing._update_tube_stiffness(st)
+        if self.beta_K > 0.0 and self.K0 is None:
+            asm = wing._mono_solvers["prescribed"].asm
+            f_int, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
+            self._pre = (st, f_int, kd)
+            self.K0_data = self.beta_K * kd * dyn.tt_mask
+            self.K0 = asm.matrix(self.K0_data)
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
@@ -241,6 +250,12 @@ class _StepLoad:
                     - dyn.membrane_force(st.x, x0=dyn.state.x) / (1.0 - p.alpha_f)
         self.f_eff = f
         return f
+
+    def assembled(self, st: NodalState):
+        """``(f_int, tangent data)`` of the structure at ``st`` if :meth:`force` assembled them at that iterate (the
+        step's first), else None (the load protocol of :meth:`StaticSolver.solve`)."""
+        pre, self._pre = self._pre, None
+        return pre[1:] if pre is not None and pre[0] is st else None
 
     @property
     def v_wind_mid(self):
@@ -302,6 +317,7 @@ class WingDynamics:
         cfg = wing.cfg
         mesh = wing.mesh
         self.alpha = AlphaParameters.from_rho_inf(cfg.structure.rho_inf)
+        self.compiled = wing.beams.backend == "numba"  # the compiled kernels of the wing's elements are available
         self.bridle = np.asarray(mesh.bridle)
         # dynamics.wing_point_mass_share of Table 1's masses as the paper's point masses on A-D, the rest spread
         f = cfg.dynamics.wing_point_mass_share
@@ -314,7 +330,7 @@ class WingDynamics:
         self.line_drag = -0.5 * cfg.aero.rho_kg_m3 * d.line_cd * d.line_diameter_m
         asm = wing._mono_solvers["prescribed"].asm
         self.solver = StaticSolver(asm, mode="modified", max_iter=cfg.fsi.max_newton_iter, contraction=0.5,
-                                   nodal_rot_limit=True)
+                                   nodal_rot_limit=True, error_estimate=True)
         n = mesh.n_nodes
         idx = asm.matrix(np.arange(1, asm.nnz + 1, dtype=float)).tocsr()
         rows = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), np.int64)
@@ -334,6 +350,7 @@ class WingDynamics:
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
+        self._rigid_fit: tuple | None = None  # (positions, mass, centre, offsets, inverse inertia) of rigid_velocity
         self.energy_consistent_membrane = cfg.structure.membrane_forces == "energy_consistent"
         if self.energy_consistent_membrane:  # scatter maps of the canopy's translations (membrane_force, ..._tangent_)
             sh = wing.shells
@@ -515,7 +532,8 @@ class WingDynamics:
         if r != 1.0:
             D = expm(r * logm(D))
         Rn = D @ st.Rn
-        return NodalState(st.x + r * (st.x - prev.x), 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
+        x = st.x + r * (st.x - prev.x)
+        return NodalState(x, 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
 
     def rigid_velocity(self, v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Mass-weighted least-squares rigid-body fit of the nodal velocities ``v`` (n_nodes, 3) (default: the
@@ -523,13 +541,17 @@ class WingDynamics:
         masses; frame of the step)."""
         m, x = self.m_node, self.state.x
         v = self.v if v is None else v
-        M = m.sum()
-        c = (m @ x) / M
+        fit = self._rigid_fit
+        if fit is None or fit[0] is not x:  # the mass centre and the inverse inertia of the current shape
+            M = m.sum()
+            c = (m @ x) / M
+            r = x - c
+            J = np.einsum("n,nk,nk->", m, r, r) * np.eye(3) - np.einsum("n,ni,nj->ij", m, r, r)
+            fit = self._rigid_fit = (x, M, c, r, np.linalg.inv(J))
+        _, M, c, r, J_inv = fit
         vc = (m @ v) / M
-        r = x - c
         H = np.einsum("n,nk->k", m, np.cross(r, v - vc))
-        J = np.einsum("n,nk,nk->", m, r, r) * np.eye(3) - np.einsum("n,ni,nj->ij", m, r, r)
-        w = np.linalg.solve(J, H)
+        w = J_inv @ H
         return vc - np.cross(w, c), w
 
     def kinetic_energy(self) -> float:

@@ -136,6 +136,24 @@ def _quat_logm(R00, R01, R02, R10, R11, R12, R20, R21, R22):
 
 
 @njit(**_JIT)
+def relative_rotation_vectors(R1, R0, out):
+    """``out[k] = rotations.logm(R1[k] @ R0[k].T)`` for (n, 3, 3) rotations ``R1``, ``R0`` into ``out`` (n, 3) [rad]:
+    each node's spatial rotation vector from ``R0`` to ``R1`` (the wing's rotations over a time step)."""
+    for k in range(R1.shape[0]):
+        a00 = R1[k, 0, 0] * R0[k, 0, 0] + R1[k, 0, 1] * R0[k, 0, 1] + R1[k, 0, 2] * R0[k, 0, 2]
+        a01 = R1[k, 0, 0] * R0[k, 1, 0] + R1[k, 0, 1] * R0[k, 1, 1] + R1[k, 0, 2] * R0[k, 1, 2]
+        a02 = R1[k, 0, 0] * R0[k, 2, 0] + R1[k, 0, 1] * R0[k, 2, 1] + R1[k, 0, 2] * R0[k, 2, 2]
+        a10 = R1[k, 1, 0] * R0[k, 0, 0] + R1[k, 1, 1] * R0[k, 0, 1] + R1[k, 1, 2] * R0[k, 0, 2]
+        a11 = R1[k, 1, 0] * R0[k, 1, 0] + R1[k, 1, 1] * R0[k, 1, 1] + R1[k, 1, 2] * R0[k, 1, 2]
+        a12 = R1[k, 1, 0] * R0[k, 2, 0] + R1[k, 1, 1] * R0[k, 2, 1] + R1[k, 1, 2] * R0[k, 2, 2]
+        a20 = R1[k, 2, 0] * R0[k, 0, 0] + R1[k, 2, 1] * R0[k, 0, 1] + R1[k, 2, 2] * R0[k, 0, 2]
+        a21 = R1[k, 2, 0] * R0[k, 1, 0] + R1[k, 2, 1] * R0[k, 1, 1] + R1[k, 2, 2] * R0[k, 1, 2]
+        a22 = R1[k, 2, 0] * R0[k, 2, 0] + R1[k, 2, 1] * R0[k, 2, 1] + R1[k, 2, 2] * R0[k, 2, 2]
+        out[k, 0], out[k, 1], out[k, 2] = _quat_logm(a00, a01, a02, a10, a11, a12, a20, a21, a22)
+    return out
+
+
+@njit(**_JIT)
 def _log_rotation(R00, R01, R02, R10, R11, R12, R20, R21, R22):
     """``shell_bending._log_rotation`` of one rotation matrix given by its entries: axis-angle formula, quaternion
     ``logm`` when ``cos t < 1e-3``."""

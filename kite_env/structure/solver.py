@@ -136,12 +136,18 @@ class StaticSolver:
     banded : bool
         Factorise with LAPACK's banded LU when the reduced tangent's bandwidth is below 1/8 of its size (DOF
         numbered along a mesh strip), else with SuperLU.
+    error_estimate : bool
+        The displacement test may also use the estimated error of the iterate instead of the last increment: with
+        the rate ``theta = |r_k| / |r_k-1|`` of the last correction ``du``, ``theta / (1 - theta) |du| <= tol_disp``
+        (``theta < 1``), the stopping rule of the simplified Newton iteration of implicit Runge-Kutta methods
+        (Hairer & Wanner, *Solving Ordinary Differential Equations II*, Sect. IV.8, Eq. 8.10-8.11). The last
+        increment alone certifies the iterate before it: one more correction than the tolerance needs.
     """
 
     def __init__(self, assembler: Assembler, tol_force: float = 1e-8, tol_disp: float = 1e-8,
                  force_floor: float = 1e-6, max_iter: int = 40, max_rot_rad: float = 0.5,
                  max_step_m: float | None = None, mode: str = "full", contraction: float = 0.25,
-                 banded: bool = True, nodal_rot_limit: bool = False):
+                 banded: bool = True, nodal_rot_limit: bool = False, error_estimate: bool = False):
         if mode not in ("full", "modified"):
             raise ValueError(f"mode must be 'full' or 'modified', got {mode!r}")
         self.asm = assembler
@@ -151,6 +157,7 @@ class StaticSolver:
         self.max_iter = max_iter
         self.max_rot_rad = max_rot_rad
         self.nodal_rot_limit = bool(nodal_rot_limit)
+        self.error_estimate = bool(error_estimate)
         self.max_step_m = max_step_m
         self.mode = mode
         self.contraction = contraction
@@ -346,7 +353,9 @@ class StaticSolver:
             the load vector (n_dof,) at an iterate and is called once per iteration before the assembly (it may also
             update state-dependent element properties); ``load.tangent(state)`` returns the pattern data (length
             ``nnz``, see :meth:`Assembler.block_data`) of ``-d f_ext / d x``, added to the tangent whenever it is
-            factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically.
+            factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically. A load that had to
+            assemble the structure at an iterate itself may hand the result over: ``load.assembled(state)`` returns
+            ``(f_int, tangent data)`` of that iterate, or None.
         tol_force, tol_disp : float, optional
             Override the solver's tolerances for this call.
         accept_force : float, optional
@@ -397,7 +406,8 @@ class StaticSolver:
                 f_scale = max(np.linalg.norm(f_ext[free]), self.force_floor)
             # the tangent is assembled only when it will be factorised (modified Newton reuses the last LU)
             want_K = self.mode == "full" or self._lu is None or self._lu_key != lu_key or force_K
-            f_int, kdata = self.asm.assemble_data(st.x, st.Rn, tangent=want_K)
+            pre = load.assembled(st) if load is not None and hasattr(load, "assembled") else None
+            f_int, kdata = pre if pre is not None else self.asm.assemble_data(st.x, st.Rn, tangent=want_K)
             if kdata is not None:
                 self._diag_max = float(np.max(np.abs(kdata[self.asm.diag_index])))
             r = f_ext - f_int
@@ -419,6 +429,9 @@ class StaticSolver:
                     * max(float(np.max(np.abs(st.x))), 1.0)
             at_floor = it >= 2 and rnorm <= floor and (work_last <= _WORK_TOL * work_first or rnorm > 0.5 * r_prev)
             last_du = history[-1][2] if history else np.inf
+            if self.error_estimate and rnorm < r_prev:  # (r_prev is inf before the first correction)
+                theta = rnorm / r_prev
+                last_du = min(last_du, theta / (1.0 - theta) * last_du)
             if at_floor or (rnorm <= tol_force * scale
                             and (last_du <= tol_disp or rnorm <= 1e-3 * tol_force * scale)):
                 history.append((it, rnorm, 0.0))

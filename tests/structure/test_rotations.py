@@ -32,3 +32,18 @@ def test_tangent_inv_matches_finite_difference():
             dw[k] = h
             fd[:, k] = (logm(expm(dw) @ expm(theta)) - logm(expm(-dw) @ expm(theta))) / (2 * h)
         assert np.allclose(Ti, fd, atol=1e-6)
+
+
+def test_compiled_relative_rotation_vectors_match_logm():
+    # the wing's rotations over a time step (kite_env.dynamics.wing_dynamics): the compiled loop against
+    # logm(R1 R0^T), from round-off-sized rotations to nearly half a turn, on every branch of Shepperd's quaternion
+    from kite_env.structure.kernels import relative_rotation_vectors
+
+    rng = np.random.default_rng(3)
+    R0 = expm(rng.normal(size=(300, 3)))
+    th = rng.normal(size=(300, 3))
+    th *= (np.geomspace(1e-12, 0.999 * np.pi, 300) / np.linalg.norm(th, axis=1))[:, None]
+    R1 = expm(th) @ R0
+    out = relative_rotation_vectors(R1, R0, np.empty((300, 3)))
+    assert np.allclose(out, logm(np.einsum("nij,nkj->nik", R1, R0)), rtol=0, atol=1e-13)
+    assert np.allclose(out, th, rtol=0, atol=1e-9)
