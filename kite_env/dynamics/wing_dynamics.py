@@ -152,7 +152,7 @@ class _StepLoad:
         # of the Newmark estimate ``v_n + dt a_n`` of the end velocities. Held at the step's start, each of them lags
         # the forces of the step's end (where generalized-alpha takes them) by one step, a first-order error: the KCU
         # of the 10 s baseline then drifted 39 cm along the path at dt = 10 ms against 5 ms (2.5 ms: 19.5 cm), the
-        # mean traction +0.34 % (-0.27 %); with the end-of-step evaluation 3.0 cm and 2.1 cm, -0.02 % and -0.02 %
+        # mean traction +0.34 % (-0.27 %); with the end-of-step evaluation a few centimetres and below 0.1 %
         # (docs/flight_model.md, section 19)
         wing, mesh = dyn.wing, dyn.wing.mesh
         at = dyn.state if at is None else at
@@ -532,8 +532,7 @@ class WingDynamics:
         if r != 1.0:
             D = expm(r * logm(D))
         Rn = D @ st.Rn
-        x = st.x + r * (st.x - prev.x)
-        return NodalState(x, 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
+        return NodalState(st.x + r * (st.x - prev.x), 0.5 * (Rn @ (3.0 * np.eye(3) - Rn.transpose(0, 2, 1) @ Rn)))
 
     def rigid_velocity(self, v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Mass-weighted least-squares rigid-body fit of the nodal velocities ``v`` (n_nodes, 3) (default: the

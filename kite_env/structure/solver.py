@@ -429,7 +429,7 @@ class StaticSolver:
                     * max(float(np.max(np.abs(st.x))), 1.0)
             at_floor = it >= 2 and rnorm <= floor and (work_last <= _WORK_TOL * work_first or rnorm > 0.5 * r_prev)
             last_du = history[-1][2] if history else np.inf
-            if self.error_estimate and rnorm < r_prev:  # (r_prev is inf before the first correction)
+            if self.error_estimate and it >= 2 and rnorm < r_prev:  # (a contraction of the last correction)
                 theta = rnorm / r_prev
                 last_du = min(last_du, theta / (1.0 - theta) * last_du)
             if at_floor or (rnorm <= tol_force * scale
