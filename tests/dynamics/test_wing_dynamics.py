@@ -259,17 +259,18 @@ def test_energy_balance_without_dissipation(rotary):
 
 @pytest.mark.parametrize("membrane_forces", ["energy_consistent", "averaged"])
 def test_energy_over_1000_steps_without_dissipation(membrane_forces):
-    """Issue 20's energy check: rho_inf = 1, no aerodynamics, no structural damping, 1000 steps of 5 ms. The
-    energy is the kinetic energy plus the stored energy of the structure (``strain_energy``: the tubes' Breukels law
-    as an energy, so the conservative tube law, structure.tube_curvature = element_energy, is needed). With the
-    canopy's membrane forces as the discrete gradient of their energy, it is kept to 2e-6 of E0 (E0 is mostly the wing's translation; the
-    deformation's energy is about 0.3 J, the drift 4e-3 J). Generalized-alpha's averaged end forces are not
-    energy-consistent for the membrane's geometric nonlinearity: their energy error is 7-13 % of the deformation's
-    energy (0.022-0.044 J), or, once it starts to grow, Newton fails (at step 695 with the step's held quantities at
-    its start, before stop 32; whether and when that growth starts depends on round-off: with the air density of
-    this vacuum at 2e-12 instead of 1e-12 kg/m^3 the same code ran the 1000 steps with 0.022 J). The canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the
-    averaged forces gain 75 % of E0 within 0.3 s, and the discrete gradient's Newton iteration does not converge
-    on a canopy that is slack all over (docs/flight_model.md, section 15)."""
+    """Issue 20's energy check: rho_inf = 1, no aerodynamics, no structural damping, 1000 steps of 5 ms. The energy is
+    the kinetic energy plus the stored energy of the structure (``strain_energy``: the tubes' Breukels law as an
+    energy, so the conservative tube law, structure.tube_curvature = element_energy, is needed). With the canopy's
+    membrane forces as the discrete gradient of their energy, it is kept to 2e-6 of E0 (E0 is mostly the wing's
+    translation; the deformation's energy is about 0.3 J, the drift 4e-3 J). Generalized-alpha's averaged end forces
+    are not energy-consistent for the membrane's geometric nonlinearity: their energy error is 7-13 % of the
+    deformation's energy (0.022-0.044 J), or, once it starts to grow, Newton fails (at step 695 with the step's held
+    quantities at its start, before stop 32; whether and when that growth starts depends on round-off: with the air
+    density of this vacuum at 2e-12 instead of 1e-12 kg/m^3 the same code ran the 1000 steps with 0.022 J). The
+    canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the averaged forces gain 75 %
+    of E0 within 0.3 s, and the discrete gradient's Newton iteration does not converge on a canopy that is slack all
+    over (docs/flight_model.md, section 15)."""
     d, step, _ = _free_wing(1.0, wrinkling=False, membrane_forces=membrane_forces, tube_curvature="element_energy")
     wing = d.wing
     E0 = d.kinetic_energy() + wing.strain_energy(d.state)

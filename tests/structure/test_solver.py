@@ -352,8 +352,8 @@ def test_a_load_may_hand_over_the_structure_it_assembled():
         counted.append(1)
         return orig(*a, **kw)
 
-    ref = StaticSolver(asm).solve(NodalState.reference(X0), None, fixed_dofs=clamp, load=_TipSpringLoad(asm, n, P, k, L),
-                                  tol_force=1e-10)
+    ref = StaticSolver(asm).solve(NodalState.reference(X0), None, fixed_dofs=clamp,
+                                  load=_TipSpringLoad(asm, n, P, k, L), tol_force=1e-10)
     asm.assemble_data = counting
     res = StaticSolver(asm).solve(NodalState.reference(X0), None, fixed_dofs=clamp, load=Handing(asm, n, P, k, L),
                                   tol_force=1e-10)
