@@ -312,10 +312,15 @@ class WingDynamics:
     (generalized-alpha averages it with the new one).
     """
 
-    def __init__(self, wing: AeroelasticWing):
+    def __init__(self, wing: AeroelasticWing, hold_bridle: bool = False):
         self.wing = wing
         cfg = wing.cfg
         mesh = wing.mesh
+        # a wing held at A-D (a wind tunnel's support; verification against the static wing): their translations
+        # are prescribed where they are, and F_b is the support's force on the wing instead of the lines'
+        self.hold_bridle = bool(hold_bridle)
+        self.held_dofs = ((6 * np.asarray(mesh.bridle)[:, None] + np.arange(3)).ravel() if self.hold_bridle
+                          else np.zeros(0, np.int64))
         self.alpha = AlphaParameters.from_rho_inf(cfg.structure.rho_inf)
         self.compiled = wing.beams.backend == "numba"  # the compiled kernels of the wing's elements are available
         self.bridle = np.asarray(mesh.bridle)
@@ -447,6 +452,9 @@ class WingDynamics:
         r = f_int - load.f_phys
         r[self.solver.auto_fixed] = 0.0
         self.a = -np.linalg.solve(self.M_blocks, r.reshape(-1, 6)[:, :3, None])[:, :, 0]  # M a_0 + r_0 = 0
+        if self.hold_bridle:  # held: no acceleration (their residual is the support's force)
+            self.a[self.bridle] = 0.0
+            self.v[self.bridle] = 0.0
         self.r_prev = r
         # rotations: the wing turns rigidly at the start, with the angular accelerations of M a_0 + r_0 = 0
         _, w = self.rigid_velocity()
@@ -485,7 +493,7 @@ class WingDynamics:
         res = None
         for attempt in range(2):
             try:
-                res = self.solver.solve(start, None, (), load=load, tol_force=fcfg.tol_force_rel,
+                res = self.solver.solve(start, None, self.held_dofs, load=load, tol_force=fcfg.tol_force_rel,
                                         tol_disp=fcfg.tol_disp_m, accept_force=fcfg.accept_force_rel)
                 break
             except ConvergenceError as exc:
@@ -512,7 +520,8 @@ class WingDynamics:
         wing.state = st
         T, _, e = load.line
         wing._free_flight = flight
-        sol = wing._solution(st, load.loads, -T[:, None] * e, flight, 1.0, history, res.iterations, load.collapsed,
+        F_b = r.reshape(-1, 6)[self.bridle, :3].copy() if self.hold_bridle else -T[:, None] * e
+        sol = wing._solution(st, load.loads, F_b, flight, 1.0, history, res.iterations, load.collapsed,
                              res.accepted)
         return sol
 
