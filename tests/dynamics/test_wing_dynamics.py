@@ -518,3 +518,29 @@ def test_a_slow_airspeed_ramp_follows_the_static_wing():
         assert np.linalg.norm(Fd - Fs, axis=1).max() < 0.005 * T  # each line's share too
     assert max(gap) < 5e-3
     assert np.mean(newton) < 1.5
+
+
+def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
+    """Issue 20's luffing tip as a physical event: half the steering range held (``constant:0.5``) with the wing with
+    inertia, the rope tether and the 2 m/s actuator; the kite loops, and the inner tip's section unloads again and
+    again: its angle of attack below zero (the paper's Fig. 12: the released tip after a lobe) for a fifth of the
+    time, down to -6 deg, its lift near zero (the canopy luffs, aero.canopy_luffing carries its load on the tubes).
+    The flight goes on, without a step made in halves (measured over 15 s: 18.7 % of the time below zero, the
+    lift at 0.1 N; docs/flight_model.md, section 20). The quasi-static wing's luffing tip ended such flights."""
+    from agents.policies import ConstantAgent
+    from kite_env.config import load_config
+    from kite_env.flight import fly
+
+    cfg = load_config(overrides=["structure.dynamic=true", "dynamics.tether=rope", "control.line_speed_max_mps=2"])
+    log = fly(cfg, ConstantAgent(0.5), duration_s=6.0)
+    s = log.series
+    assert not log.meta["crashed"] and s["t"][-1] == pytest.approx(6.0)
+    assert np.max(s["substeps"]) == 1
+    tip = np.degrees(s["alpha"][:, 0])
+    below = tip < 0.0
+    assert below.mean() > 0.05 and tip.min() < -3.0
+    assert below[s["t"] > 3.0].any()  # not only in the start's transient: again in the loops
+    lift = s["section_lift"][:, 0]
+    assert lift[below].min() < 0.05 * lift.mean()
+    turn = np.unwrap(s["course"])
+    assert abs(turn[-1] - turn[0]) > np.radians(360.0)  # it loops (566 deg in the 6 s)
