@@ -526,7 +526,8 @@ def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
     again: its angle of attack below zero (the paper's Fig. 12: the released tip after a lobe) for a fifth of the
     time, down to -6 deg, its lift near zero (the canopy luffs, aero.canopy_luffing carries its load on the tubes).
     The flight goes on, without a step made in halves (measured over 15 s: 18.7 % of the time below zero, the
-    lift at 0.1 N; docs/flight_model.md, section 20). The quasi-static wing's luffing tip ended such flights."""
+    lift at 0.1 N; docs/flight_model.md, section 20). The quasi-static wing under the same input (rod tether) dips
+    to -0.8 deg, 1.7 % of 6 s."""
     from agents.policies import ConstantAgent
     from kite_env.config import load_config
     from kite_env.flight import fly
