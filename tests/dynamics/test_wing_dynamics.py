@@ -471,15 +471,16 @@ def test_rope_tether_goes_slack_and_catches_the_kcu_again():
         assert np.linalg.norm(r.state.r[4]) == pytest.approx(l_t, abs=1e-9) and abs(r.state.v[4] @ e) < 1e-9
 
 
-def _held_wing_ramp(structural_mass_scale=1.0, V0=20.0, V1=25.0, ramp_s=2.0, settle_s=0.5, dt=0.005):
-    """The wing with inertia held at A-D in a wind tunnel (no gravity, no line drag), started from the static
-    equilibrium at ``V0`` and the airspeed ramped to ``V1`` over ``ramp_s``; at five instants of the ramp its F_b
-    (the support's force on the wing) and shape against the static wing's at the same bridle points and airspeed.
-    Returns ``(F_dyn, F_static, shape_gap, newton)`` lists."""
+def _held_wing_ramp(structural_mass_scale=1.0, V0=20.0, V1=25.0, ramp_s=2.0, settle_s=0.5, dt=0.005, **structure):
+    """The wing with inertia held at A-D in a wind tunnel (``WingDynamics(hold_bridle=True)``; no gravity, no line
+    drag), started from the static equilibrium at ``V0`` and the airspeed ramped to ``V1`` over ``ramp_s``; at four
+    instants of the ramp its F_b (the support's force on the wing) and shape against the static wing's at the same
+    bridle points and airspeed. ``structure``: overrides of the structure config. Returns ``(F_dyn, F_static,
+    shape_gap, newton)`` lists."""
     from kite_env.fsi import FlightState
 
     base = Config()
-    cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True),
+    cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True, **structure),
                               dynamics=dataclasses.replace(base.dynamics, gravity_mps2=0.0, line_cd=0.0))
     wing, static = nominal_wing(cfg.kite.name, cfg), nominal_wing(cfg.kite.name, cfg)
     alpha = np.deg2rad(6.0)
@@ -490,6 +491,8 @@ def _held_wing_ramp(structural_mass_scale=1.0, V0=20.0, V1=25.0, ramp_s=2.0, set
     n = wing.mesh.n_nodes
     d.start(wing.state.copy(), np.zeros((n, 3)), wing.kcu_position(), np.zeros(3), slack, np.zeros(3),
             FlightState.wind_tunnel(V0, alpha).v_wind)
+    d.a[:] = 0.0  # the static equilibrium to the solver's tolerance: at rest (its residual of a few N on grams of
+    # node would be a start with kilometres per second squared)
     n_settle, n_ramp = round(settle_s / dt), round(ramp_s / dt)
     out = ([], [], [], [])
     for k in range(1, n_settle + n_ramp + 1):
@@ -506,13 +509,22 @@ def _held_wing_ramp(structural_mass_scale=1.0, V0=20.0, V1=25.0, ramp_s=2.0, set
     return out
 
 
-def test_a_slow_airspeed_ramp_follows_the_static_wing():
-    """Issue 20's slow-ramp check: the wing with inertia held at its bridle points, the airspeed ramped from 20 to
-    25 m/s over 2 s, has the static wing's bridle forces within 0.5 % (measured 0.07 %, the aerodynamic damping's
-    lag: 0.02 % over an 8 s ramp) and its shape within 5 mm (2.3 mm)."""
-    F_dyn, F_st, gap, newton = _held_wing_ramp()
+@pytest.mark.parametrize("case", ["default", "mass -> 0", "40 to 55 m/s"])
+def test_a_slow_airspeed_ramp_follows_the_static_wing(case):
+    """Issue 20's checks against the static wing, on the wing with inertia held at its bridle points (the static
+    wing's boundary conditions): the airspeed ramped, its bridle forces stay within 0.5 % of the static wing's and
+    its shape within 5 mm. ``default``: 20 to 25 m/s over 2 s, measured 0.077 % (the aerodynamic damping's lag:
+    smaller for a slower ramp) and 2.6 mm. ``mass -> 0``: the structural mass times 1e-3, no added mass, no rotary
+    inertia: 0.077 % and 2.7 mm, the step a damped static solve. ``40 to 55 m/s`` over 6 s (a 10 m/s kite's
+    airspeeds): 0.065 % and 2.2 mm, no flutter (with the flight's reference inflow, the rigid fit of the nodes'
+    velocities, the held trailing edge oscillated from 44 m/s and the light wing from 22 m/s: docs/flight_model.md,
+    section 20)."""
+    kw = {"default": {}, "mass -> 0": dict(structural_mass_scale=1e-3, added_mass_factor=0.0,
+                                           rotary_inertia_factor=0.0),
+          "40 to 55 m/s": dict(V0=40.0, V1=55.0, ramp_s=6.0)}[case]
+    F_dyn, F_st, gap, newton = _held_wing_ramp(**kw)
     total = [np.linalg.norm(F.sum(axis=0)) for F in F_st]
-    assert total[-1] > 1.3 * total[0]  # (3.53 to 4.88 kN between the first and the last check)
+    assert total[-1] > 1.3 * total[0]  # (3.53 to 4.88 kN between the first and the last check at 20-25 m/s)
     for Fd, Fs, T in zip(F_dyn, F_st, total):
         assert np.linalg.norm(Fd.sum(axis=0) - Fs.sum(axis=0)) < 0.005 * T
         assert np.linalg.norm(Fd - Fs, axis=1).max() < 0.005 * T  # each line's share too
