@@ -61,9 +61,10 @@ class StructureConfig:
     te_wire_E_Pa: float = 5.5e8  # [Pa]
     te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
     # the wing with inertia (dynamics/wing_dynamics.py): nodal masses (Table 1's 10 kg, 70 % on the LE tube) and
-    # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines; false = the
-    # paper's quasi-static wing on the particles A-D
-    dynamic: bool = False
+    # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines (the default since
+    # stop 33, when issue 20's verification held: docs/flight_model.md, sections 12-20); false = the paper's
+    # quasi-static wing on the particles A-D
+    dynamic: bool = True
     rho_inf: float = 0.8  # generalized-alpha spectral radius at infinite frequency (1 = no numerical damping) [-]
     # added mass normal to the canopy: this factor times rho pi c^2 / 4 per unit span with Lissaman & Brown's
     # k_C = AR / (1 + AR) (AIAA-93-1236); 0 = none [-]
@@ -163,9 +164,11 @@ class DynamicsConfig:
     # tether between ground station and KCU: "rod" = the paper's bilateral constraint |r_KCU| = l_t (Eq. 12-13; a
     # tether that would have to push ends the flight as "slack tether"); "rope" = a unilateral constraint that only
     # pulls: the KCU flies free inside the sphere when the tether would go slack, and its outward radial velocity
-    # is removed (an inelastic jerk) when it reaches the sphere again (dynamics/dynamic_simulator.py; the wing with
-    # inertia only)
-    tether: str = "rod"
+    # is removed (an inelastic jerk) when it reaches the sphere again (dynamics/dynamic_simulator.py). The wing with
+    # inertia's tether (the default since stop 33: a tether cannot push, and with the rod random steering ended every
+    # episode within 0.4 s, docs/flight_model.md, section 14); the quasi-static wing (structure.dynamic = false)
+    # always flies the paper's rod: a slack tether unloads the bridle, which that wing cannot follow
+    tether: str = "rope"
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
     # share of Table 1's wing mass kept as the paper's four point masses at A-D; the rest is spread over the FE nodes
     # (70 % on the LE tube) and condensed onto A-D with the wing's static modes (dynamics/wing_mass.py). 1 = the
@@ -189,10 +192,11 @@ class ControlConfig:
     beta_min: float = 0.2  # blending: smallest weight of the path tangent [-]
     control_dt_s: float = 0.02  # controller update period [s]
     # speed limit of the KCU's steering-line actuator, per controller period at most this times control_dt_s on
-    # each axis of actuator_axes (kite_env.control.actuate); 0 = none, the paper's Eq. 16-17 (default). 2 m/s is
-    # above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower (docs/flight_model.md,
-    # section 13) [m/s]
-    line_speed_max_mps: float = 0.0
+    # each axis of actuator_axes (kite_env.control.actuate); 0 = none, the paper's Eq. 16-17. 2 m/s (the default
+    # since stop 33, with the wing with inertia: a held full input otherwise moves the lines by metres in one
+    # controller period) is above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower
+    # (docs/flight_model.md, section 13) [m/s]
+    line_speed_max_mps: float = 2.0
     # how that limit acts: "steer_depower" = as the KCU's two motors, a steering motor for the difference and a
     # depower motor for the common change of both lines (van der Vlugt et al., "Design and experimental
     # characterization of a pumping kite power system", in Airborne Wind Energy, Springer 2013, ch. 23; Fechner et
@@ -431,9 +435,6 @@ def _validate(cfg: Config) -> None:
             names = [repr(c) for c in choices]
             allowed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
             raise ConfigError(f"config key '{key}' must be {allowed}, got {v!r}")
-    if cfg.dynamics.tether == "rope" and not cfg.structure.dynamic:
-        raise ConfigError("config key 'dynamics.tether' = 'rope' needs structure.dynamic = true (a slack tether "
-                          "unloads the bridle, which the quasi-static wing cannot follow)")
     if cfg.dynamics.coupling not in ("explicit", "predictor_corrector"):
         raise ConfigError("config key 'dynamics.coupling' must be 'explicit' or 'predictor_corrector', "
                           f"got {cfg.dynamics.coupling!r}")
@@ -445,6 +446,10 @@ def _validate(cfg: Config) -> None:
     if not 0.0 <= cfg.structure.tube_fold_onset_deg < 180.0:
         raise ConfigError("config key 'structure.tube_fold_onset_deg' must lie in [0, 180) (0: no fold contact), "
                           f"got {cfg.structure.tube_fold_onset_deg}")
+    if cfg.structure.dynamic and cfg.dynamics.wing_point_mass_share >= 1.0:
+        raise ConfigError("structure.dynamic=true spreads 1 - dynamics.wing_point_mass_share of the wing mass over "
+                          "its nodes: a share of 1 leaves the canopy's nodes massless (use < 1, or "
+                          "structure.dynamic=false for the paper's point masses alone)")
     if not 0.0 <= cfg.structure.rho_inf <= 1.0:
         raise ConfigError(f"config key 'structure.rho_inf' must lie in [0, 1], got {cfg.structure.rho_inf}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:

@@ -42,6 +42,10 @@ def test_overrides_and_errors(tmp_path):
     with pytest.raises(ConfigError, match="'aero.cm_regression_ref_over_c' must lie in"):
         load_config(overrides=["aero.cm_regression_ref_over_c=1.5"])
     assert load_config(overrides=["structure.tube_fold_onset_deg=0"]).structure.tube_fold_onset_deg == 0.0
+    # the wing with inertia (the default) spreads part of the wing mass over its nodes: all on A-D leaves them massless
+    with pytest.raises(ConfigError, match="wing_point_mass_share"):
+        load_config(overrides=["dynamics.wing_point_mass_share=1"])
+    assert load_config(overrides=["dynamics.wing_point_mass_share=1", "structure.dynamic=false"])
     for bad in ("180", "-5"):
         with pytest.raises(ConfigError, match="'structure.tube_fold_onset_deg' must lie in"):
             load_config(overrides=[f"structure.tube_fold_onset_deg={bad}"])

@@ -294,7 +294,8 @@ class KiteFigureEightEnv(gym.Env):
             if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(float(r_kcu @ r_kcu)):
                 reason = "ground"
                 break
-            if rec.tether_force < cfg.env.slack_tether_N and cfg.dynamics.tether == "rod":
+            rope = cfg.dynamics.tether == "rope" and cfg.structure.dynamic  # (the quasi-static wing's is the rod)
+            if rec.tether_force < cfg.env.slack_tether_N and not rope:
                 reason = "slack tether"  # a rope (dynamics.tether) goes slack and flies on
                 break
         self.steps += 1

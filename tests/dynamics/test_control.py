@@ -13,7 +13,7 @@ from kite_env.trajectory import Lemniscate, TrajectoryConfig, heading_angle, sph
 
 
 def test_actuator_closes_the_steering_loop_and_the_force_loop():
-    cfg = ControlConfig()
+    cfg = ControlConfig(line_speed_max_mps=0.0)  # the paper's Eq. 16-19 without the actuator's speed limit
     act = LineActuator(cfg, 25.2, 25.2)
     lengths = np.array([25.1, 25.3, 25.1, 25.3])
     T = np.array([1000.0, 300.0, 1000.0, 300.0])  # mu = 0.3: no force correction
