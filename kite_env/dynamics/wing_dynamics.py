@@ -158,7 +158,6 @@ class _StepLoad:
         at = dyn.state if at is None else at
         x_sec0 = at.x[mesh.sections]
         self.W = dyn.section_weights(x_sec0)
-        V, w = dyn.rigid_velocity()
         if dyn.hold_bridle:
             # held at A-D, the wing has no rigid motion: the reference is the support's (the tunnel's) frame, and the
             # deviation damping acts on all of the deformation velocity. The flight's reference below, the rigid fit
@@ -166,8 +165,10 @@ class _StepLoad:
             # motion and feed it back into every section's inflow: a held wing with half its structural mass and no
             # added mass grew unstable at 5 ms with it, the default one from 44 m/s (docs/flight_model.md, section 20)
             V, w = np.zeros(3), np.zeros(3)
-        elif at is not dyn.state:
-            V = V + dt * dyn.rigid_velocity(dyn.a)[0]  # (the rigid fit is linear in the velocities)
+        else:
+            V, w = dyn.rigid_velocity()
+            if at is not dyn.state:
+                V = V + dt * dyn.rigid_velocity(dyn.a)[0]  # (the rigid fit is linear in the velocities)
         # the reference inflow is the wing's rigid translation only: its rotation (yaw, roll, pitch rates) enters,
         # with the deformation, through the dissipative deviation damping. Taken into the reference (each
         # section's load at the inflow of V + omega x r_p, held over the step, its change spread by the moment law

@@ -279,6 +279,9 @@ class KiteFigureEightEnv(gym.Env):
         dl_star = a * cfg.control.delta_l_max_m
         self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
         reason = detail = None
+        # a slack tether ends the episode on a rod; the default rope goes slack and flies on (the quasi-static wing's
+        # tether is always the rod)
+        slack_ends = cfg.dynamics.tether == "rod" or not cfg.structure.dynamic
         for _ in range(self.n_physics):
             t0 = time.perf_counter()
             try:
@@ -294,9 +297,8 @@ class KiteFigureEightEnv(gym.Env):
             if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(float(r_kcu @ r_kcu)):
                 reason = "ground"
                 break
-            rope = cfg.dynamics.tether == "rope" and cfg.structure.dynamic  # (the quasi-static wing's is the rod)
-            if rec.tether_force < cfg.env.slack_tether_N and not rope:
-                reason = "slack tether"  # a rope (dynamics.tether) goes slack and flies on
+            if slack_ends and rec.tether_force < cfg.env.slack_tether_N:
+                reason = "slack tether"
                 break
         self.steps += 1
         prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied
