@@ -210,11 +210,13 @@ class ControlConfig:
 class SimConfig:
     duration_s: float = 60.0  # simulated time [s]
     warmup_s: float = 3.0  # initial transient excluded from the metrics [s]
-    initial_speed_mps: float = 22.0  # initial flight speed along the path [m/s]
-    # > 0: the initial speed is this multiple of wind.speed_mps instead (a kite's crosswind speed grows in proportion
-    # to the wind, Loyd 1980, J. Energy 4(3), 106; 4.4 gives the 22 m/s above at the paper's 5 m/s). The wing with
-    # inertia folds in the acceleration from 22 m/s at 7 and 10 m/s (docs/flight_model.md, section 12) [-]
-    initial_speed_per_wind: float = 0.0
+    # initial flight speed along the path: > 0 this speed [m/s]; 0 = initial_speed_per_wind times wind.speed_mps
+    initial_speed_mps: float = 0.0
+    # the initial speed as a multiple of wind.speed_mps where initial_speed_mps is 0: a kite's crosswind speed grows in
+    # proportion to the wind (Loyd 1980, J. Energy 4(3), 106); 4.4 gives the paper's 22 m/s at its 5 m/s. From 22 m/s
+    # at 10 m/s the wing starts at half its flight speed and a third of its flight force and folds in the acceleration
+    # (docs/flight_model.md, sections 12 and 22) [-]
+    initial_speed_per_wind: float = 4.4
     fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
     surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name
     surrogate_fallback: bool = False  # surrogate: a state outside the sampled envelope continues in the FE model
@@ -286,10 +288,10 @@ class Config:
 
     @property
     def start_speed_mps(self) -> float:
-        """The flight's initial speed along the path [m/s]: ``sim.initial_speed_per_wind`` times the wind speed where
-        that is set (> 0), else ``sim.initial_speed_mps``."""
-        k = self.sim.initial_speed_per_wind
-        return k * self.wind.speed_mps if k > 0.0 else self.sim.initial_speed_mps
+        """The flight's initial speed along the path [m/s]: ``sim.initial_speed_mps`` where that is set (> 0), else
+        ``sim.initial_speed_per_wind`` times the wind speed."""
+        v = self.sim.initial_speed_mps
+        return v if v > 0.0 else self.sim.initial_speed_per_wind * self.wind.speed_mps
 
 
 # values that must be strictly positive (everything else numeric must be finite)
@@ -305,7 +307,7 @@ _POSITIVE = {
     "dynamics.baumgarte_1_per_s", "dynamics.winch_force_N", "dynamics.winch_damping_Ns_per_m",
     "dynamics.winch_speed_max_mps", "dynamics.winch_time_constant_s", "control.k2", "control.delta_l_max_m",
     "control.beta_distance_deg",
-    "control.control_dt_s", "sim.duration_s", "sim.initial_speed_mps", "env.max_episode_s", "env.force_scale_N",
+    "control.control_dt_s", "sim.duration_s", "env.max_episode_s", "env.force_scale_N",
     "env.tracking_scale_deg", "env.traction_ref_N", "env.initial_speed_min_mps", "env.initial_speed_max_mps",
     "env.reset_attempts", "env.start_curvature_max",
 }
@@ -313,7 +315,7 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "structure.added_mass_factor", "structure.rayleigh_beta_s", "sim.initial_speed_per_wind",
+    "structure.added_mass_factor", "structure.rayleigh_beta_s", "sim.initial_speed_per_wind", "sim.initial_speed_mps",
     "structure.rotary_inertia_factor",
     "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max",
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
@@ -458,6 +460,9 @@ def _validate(cfg: Config) -> None:
         raise ConfigError(f"config key 'kite.n_sections' must be odd and >= 7, got {cfg.kite.n_sections}")
     if cfg.kite.n_chord < 3:
         raise ConfigError(f"config key 'kite.n_chord' must be >= 3, got {cfg.kite.n_chord}")
+    if cfg.sim.initial_speed_mps <= 0.0 and cfg.sim.initial_speed_per_wind <= 0.0:
+        raise ConfigError("config keys 'sim.initial_speed_mps' and 'sim.initial_speed_per_wind' are both 0: set the "
+                          "start speed [m/s] or its multiple of wind.speed_mps")
     env = cfg.env
     for lo, hi in (("wind_speed_min_mps", "wind_speed_max_mps"), ("initial_speed_min_mps", "initial_speed_max_mps"),
                    ("initial_speed_per_wind_min", "initial_speed_per_wind_max")):

@@ -122,8 +122,12 @@ def test_agent_recipes_pin_the_legacy_model_the_fast_fidelity_was_fitted_to():
 def test_start_speed_can_follow_the_wind():
     from kite_env.config import load_config
 
-    assert load_config(None, []).start_speed_mps == 22.0
-    cfg = load_config(None, ["sim.initial_speed_per_wind=4.4", "wind.speed_mps=7"])
-    assert cfg.start_speed_mps == pytest.approx(30.8)
+    assert load_config(None, []).start_speed_mps == 22.0  # 4.4 times the paper's 5 m/s
+    assert load_config(None, ["wind.speed_mps=7"]).start_speed_mps == pytest.approx(30.8)
+    assert load_config(None, ["wind.speed_mps=10"]).start_speed_mps == pytest.approx(44.0)
+    # a speed set in m/s wins over the multiple of the wind
+    assert load_config(None, ["wind.speed_mps=10", "sim.initial_speed_mps=22"]).start_speed_mps == 22.0
     with pytest.raises(ConfigError, match="sim.initial_speed_per_wind"):
         load_config(None, ["sim.initial_speed_per_wind=-1"])
+    with pytest.raises(ConfigError, match="both 0"):
+        load_config(None, ["sim.initial_speed_per_wind=0"])

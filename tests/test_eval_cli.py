@@ -282,3 +282,13 @@ def test_a_random_episode_does_not_depend_on_the_episodes_before_it():
     both, alone = returns([4, 5]), returns([5])
     assert both[1] == alone[0]
     assert both[0] != both[1]  # the seeds draw other actions
+
+
+def test_a_start_without_a_converged_wing_is_one_message_and_nothing_written(tmp_path, capsys):
+    """The wing at the start does not converge (here: one Newton iteration allowed, not even from the faster starts
+    of the continuation): one line naming it, exit 1, no output folder (before: a traceback)."""
+    out = tmp_path / "run"
+    assert main(["--duration", "0.1", "--out", str(out), "--set", "fsi.max_newton_iter=1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "reset failed: the wing did not converge at the start" in err[-1] and "nothing written" in err[-1]
+    assert not out.exists() and not list(tmp_path.iterdir())

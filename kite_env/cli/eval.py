@@ -403,6 +403,8 @@ def main(argv=None) -> int:
         if bar is not None:
             bar.update(max(0.0, min(total, done[0] + t) - bar.n))
 
+    from kite_env.envs.figure_eight import StartError
+
     out.resolve().parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.resolve().parent))
     results: list[tuple[str, dict]] = []
@@ -431,6 +433,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"\n{PROG}: interrupted, nothing written", file=sys.stderr)
         return 130
+    except StartError as exc:  # no converged start: one message, nothing written
+        if bar is not None:
+            bar.close()
+            bar = None
+        print(f"{PROG}: error: {exc}; nothing written", file=sys.stderr)
+        return 1
     finally:
         if bar is not None:
             bar.close()

@@ -85,6 +85,10 @@ def resolve_config(config: Config | dict | str | None = None, overrides=(), fide
     return cfg
 
 
+class StartError(RuntimeError):
+    """``reset()`` found no start: the wing did not converge at any drawn start (``env.reset_attempts``)."""
+
+
 class KiteFigureEightEnv(gym.Env):
     """Steer a flexible leading-edge-inflatable kite along a figure-eight with the steering lines.
 
@@ -243,7 +247,7 @@ class KiteFigureEightEnv(gym.Env):
                 last_error = exc
                 failed_starts += 1
         else:
-            raise RuntimeError(f"reset failed: the wing did not converge at the start ({last_error})")
+            raise StartError(f"reset failed: the wing did not converge at the start ({last_error})")
         self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
         self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
         self.s_hint = s0

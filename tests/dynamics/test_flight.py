@@ -212,6 +212,41 @@ def test_a_step_whose_wing_fails_is_made_in_halves(monkeypatch):
         no_split.step(no_split.L_B0, no_split.L_D0)
 
 
+def test_a_start_whose_cold_solve_fails_is_continued_from_a_faster_one():
+    """The start at 4 m/s with turbulence 0.1 (wind.seed 0) at 4.4 times the wind (17.6 m/s, the inflow 11 deg off the
+    path): the cold solve of its wing (a load ramp from the unloaded wing) fails; the reset continues it from the same
+    start flown 1.25 times faster, bringing the speed back in warm solves (FlightSimulator._start_by_continuation).
+    Before, the env drew such a start again or, in kite-eval, stopped with "reset failed". The kite leaves at 17.6 m/s
+    and the first second flies (docs/flight_model.md, section 22)."""
+    from kite_env.config import load_config
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.flight import evaluation_config
+
+    cfg = load_config(overrides=["wind.speed_mps=4", "wind.turbulence_intensity=0.1"])
+    assert cfg.start_speed_mps == pytest.approx(17.6)
+    env = KiteFigureEightEnv(config=evaluation_config(cfg, 1.0))
+    used = []
+    real = FlightSimulator._start_by_continuation
+
+    def spy(self, X, first):
+        used.append(str(first))
+        return real(self, X, first)
+
+    FlightSimulator._start_by_continuation = spy
+    try:
+        _, info = env.reset(seed=0)
+    finally:
+        FlightSimulator._start_by_continuation = real
+    assert len(used) == 1 and "did not converge" in used[0]  # the cold solve failed and was continued
+    assert info["failed_starts"] == 0
+    assert float(np.linalg.norm(env.rec.state.v[4])) == pytest.approx(17.6, rel=1e-6)
+    done = False
+    while not done:
+        _, _, term, trunc, info = env.step(np.zeros(1))
+        done = term or trunc
+    assert info["termination_reason"] == "time limit" and info["t"] == pytest.approx(1.0)
+
+
 def test_reset_starts_at_the_wind_scaled_speed():
     cfg = dataclasses.replace(Config(), sim=dataclasses.replace(Config().sim, initial_speed_per_wind=4.4),
                               wind=dataclasses.replace(Config().wind, speed_mps=7.0))
