@@ -212,10 +212,10 @@ class SimConfig:
     warmup_s: float = 3.0  # initial transient excluded from the metrics [s]
     # initial flight speed along the path: > 0 this speed [m/s]; 0 = initial_speed_per_wind times wind.speed_mps
     initial_speed_mps: float = 0.0
-    # the initial speed as a multiple of wind.speed_mps where initial_speed_mps is 0: a kite's crosswind speed grows in
-    # proportion to the wind (Loyd 1980, J. Energy 4(3), 106); 4.4 gives the paper's 22 m/s at its 5 m/s. From 22 m/s
-    # at 10 m/s the wing starts at half its flight speed and a third of its flight force and folds in the acceleration
-    # (docs/flight_model.md, sections 12 and 22) [-]
+    # the initial speed as a multiple of wind.speed_mps where initial_speed_mps is 0: a kite's crosswind speed grows
+    # in proportion to the wind (Loyd 1980, J. Energy 4(3), 106); 4.4 gives the paper's 22 m/s at its 5 m/s. From
+    # 22 m/s at 10 m/s the wing starts at half its flight speed and folds in the acceleration (docs/flight_model.md,
+    # sections 12 and 22) [-]
     initial_speed_per_wind: float = 4.4
     fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
     surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name

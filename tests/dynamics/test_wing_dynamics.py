@@ -561,9 +561,10 @@ def test_at_10_mps_the_kite_flies_on_the_winch_from_its_wind_scaled_start():
     """Issue 19's 10 m/s (turbulence 0.1) with the wing with inertia and the ground station reeling out in force
     control: from the default start at 4.4 times the wind (44 m/s) the first 6 s fly without a step made in halves,
     the tips keep their shape (tip distance above 4 m, against 5.2 m at the start) and after the start's 23 kN the
-    winch holds the traction below 20 kN while it reels out (measured over 120 s: 3 figure-eights, 6.9-16.4 kN, docs/flight_model.md,
-    section 22). From the old 22 m/s start (half the flight speed) the tips fold within 0.35 s: the acceleration to
-    15 kN drives a static divergence of the tips (linearised at 0.17 s: +52 1/s), in the model's physics."""
+    winch holds the traction below 20 kN while it reels out (measured over 120 s: 3 figure-eights, 6.9-16.4 kN,
+    docs/flight_model.md, section 22). From the old 22 m/s start (half the flight speed) the tips fold within
+    0.35 s: the acceleration to 15 kN drives a static divergence of the tips (linearised at 0.17 s: +52 1/s), in the
+    model's physics."""
     from kite_env.config import load_config
     from kite_env.flight import fly
 
