@@ -51,7 +51,7 @@ def open_loop_flight(cfg: Config, dl_m: float, t_hold_s: float = 0.5, window_s: 
     window_s : (2,) float [s]
         Averaging window after ``t_hold_s``.
     speed_mps : float, optional [m/s]
-        Start speed (default ``cfg.sim.initial_speed_mps``).
+        Start speed (default ``cfg.start_speed_mps``).
     """
     path = Lemniscate(cfg.trajectory)
     sim = FlightSimulator(cfg, WindField(cfg.wind))
