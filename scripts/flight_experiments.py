@@ -38,7 +38,7 @@ def _setup(overrides):
     path = Lemniscate(cfg.trajectory)
     sim = FlightSimulator(cfg, WindField(cfg.wind))
     pol = BaselinePolicy(cfg.control, path)
-    rec = sim.reset(path.point(0.0), path.tangent(0.0), cfg.start_speed_mps)
+    rec = sim.reset(path.point(0.0), path.tangent(0.0))
     pol.reset(0.0)
     return cfg, sim, pol, rec, LineActuator(cfg.control, sim.L_B0, sim.L_D0)
 

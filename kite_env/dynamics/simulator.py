@@ -211,37 +211,34 @@ class FlightSimulator:
 
     #: kite speeds (times the start's) from which the start's wing is continued when its cold solve fails
     START_SPEED_FACTORS = (1.25, 1.5, 2.0)
-    #: the continuation's smallest step, a fraction of the way from the faster start to the start
-    START_STEP_MIN = 1.0 / 64.0
 
     def _start_by_continuation(self, X: FlightState, first: WingConvergenceError):
         """The start's static wing where its cold solve (a load ramp from the unloaded wing) fails: a continuation in
         the kite's speed. The cold solve is made at the same start flown faster (``START_SPEED_FACTORS``: the
         apparent wind closer to the chord, a smaller angle of attack), then the speed is brought back to the
-        start's in warm solves, each from the last equilibrium, in steps of a quarter of the way, halved where one
-        fails. Where the cold solve failed, a start in turbulence at 4 m/s (17.6 m/s: the inflow 11 deg off the
-        path) had no converged wing and the env drew the start again (docs/flight_model.md, section 22)."""
+        start's in warm solves by :meth:`AeroelasticWing._continuation` (a quarter of the way at most, halved where
+        a solve fails). Where the cold solve failed, a start in turbulence at 4 m/s (17.6 m/s: the inflow 11 deg off
+        the path) had no converged wing and the env drew the start again (docs/flight_model.md, section 22)."""
         wing = self.wing
         errors = [str(first).splitlines()[0]]
         for f in self.START_SPEED_FACTORS:
-            at = lambda lam, f=f: FlightState(v_kite=X.v_kite * (f + (1.0 - f) * lam), omega=X.omega, v_wind=X.v_wind)
+            def at(lam, f=f):
+                return FlightState(v_kite=X.v_kite * (f + (1.0 - f) * lam), omega=X.omega, v_wind=X.v_wind)
+
+            last = []
+
+            def solve_at(state, lam):
+                last[:] = [wing.solve(None, at(lam), support="lines", warm=True)]
+                return wing.state
+
             wing.reset()  # (a failed solve leaves its factorisations, secants and line tensions behind)
             try:
-                sol = wing.solve(None, at(0.0), support="lines", warm=False)
+                last[:] = [wing.solve(None, at(0.0), support="lines", warm=False)]
+                wing._continuation(wing.state, 0.0, 1.0, 0.25, solve_at, [])
             except WingConvergenceError as exc:
                 errors.append(f"x{f}: {str(exc).splitlines()[0]}")
                 continue
-            lam, h = 0.0, 0.25
-            while lam < 1.0 and h >= self.START_STEP_MIN:
-                nxt = min(1.0, lam + h)
-                try:
-                    sol = wing.solve(None, at(nxt), support="lines", warm=True)
-                    lam = nxt
-                except WingConvergenceError:
-                    h *= 0.5
-            if lam == 1.0:
-                return sol
-            errors.append(f"x{f}: the continuation stopped at {lam:.3f} of the way")
+            return last[0]
         raise SimulationError("wing did not converge at the initial state", "; ".join(errors))
 
     # ------------------------------------------------------------------ stepping

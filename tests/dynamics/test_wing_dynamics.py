@@ -348,7 +348,7 @@ def _baseline_flight(cfg, duration):
     path = Lemniscate(cfg.trajectory)
     sim = make_simulator(cfg, WindField(cfg.wind))
     pol = BaselinePolicy(cfg.control, path)
-    rec = sim.reset(path.point(0.0), path.tangent(0.0), cfg.start_speed_mps)
+    rec = sim.reset(path.point(0.0), path.tangent(0.0))
     pol.reset(0.0)
     act = LineActuator(cfg.control, sim.L_B0, sim.L_D0)
     n_ctrl = round(cfg.control.control_dt_s / cfg.dynamics.dt_s)
@@ -411,7 +411,7 @@ def test_held_steering_turns_and_the_yaw_twist_oscillation_decays():
 
         path = Lemniscate(cfg.trajectory)
         sim = make_simulator(cfg, WindField(cfg.wind))
-        rec = sim.reset(path.point(0.0), path.tangent(0.0), cfg.start_speed_mps)
+        rec = sim.reset(path.point(0.0), path.tangent(0.0))
         t, w = [], []
         while rec.t < 1.6 - 1e-9:
             d = 0.3 if rec.t >= 0.5 else 0.0
