@@ -58,6 +58,8 @@ from kite_env.aero.sections import section_geometry
 from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
+from kite_env.geometry.mesh import BEAM_TIP
+from kite_env.structure.beam import BeamSet
 from kite_env.structure.kernels import relative_rotation_vectors
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
@@ -184,6 +186,7 @@ class _StepLoad:
         # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
         self.K0 = None
+        self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
             self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
@@ -224,6 +227,8 @@ class _StepLoad:
             self._pre = (st, f_int, kd)
             self.K0_data = self.beta_K * kd * dyn.tt_mask
             self.K0 = asm.matrix(self.K0_data)
+            if dyn.tip_rods is not None:
+                self.Kb_at = dyn.tip_tangents(st)
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
@@ -258,6 +263,32 @@ class _StepLoad:
                     - dyn.membrane_force(st.x, x0=dyn.state.x) / (1.0 - p.alpha_f)
         self.f_eff = f
         return f
+
+    def tangent_snapshot(self, st: NodalState):
+        """The tip rods' element tangents at ``st``, where the solver factorises the step's tangent, and at this
+        step's Newton start (in the Rayleigh damping ``K0``): what :meth:`tangent_change` compares with."""
+        dyn = self.dyn
+        return None if dyn.tip_rods is None else (dyn.tip_tangents(st), self.Kb_at)
+
+    def tangent_change(self, st: NodalState, snapshot) -> tuple | None:
+        """The change of the step's tangent on the tip rods' DOF since the factorisation of ``snapshot``
+        (:meth:`tangent_snapshot`): their stiffness at the iterate, and their share of the Rayleigh damping ``c_v
+        beta K_T`` at this step's Newton start. Returns ``(dofs, dT)`` for :meth:`StaticSolver._block_correction`.
+
+        The tip rods (glass fibre, the wing's stiffest members: ``EA / L`` about 1e7 N/m) turn with the tips'
+        twist from step to step. A factorisation kept over a few steps (modified Newton) has their axial stiffness
+        along the old direction, and the first Newton increment then contracts the residual by 0.02 (median)
+        where a fresh tangent gives 1e-3; four fifths of the next residual are this change
+        (docs/flight_model.md, section 23). The rods are cheap to evaluate and sit on 12 nodes."""
+        if snapshot is None:
+            return None
+        dyn = self.dyn
+        Kt0, Kt_at0 = snapshot
+        D = dyn.tip_tangents(st) - Kt0
+        if self.K0 is not None and Kt_at0 is not None and self.Kb_at is not None:
+            D += (self.c_v * self.beta_K) * dyn.tip_tt * (self.Kb_at - Kt_at0)
+        k = dyn.tip_dofs.size
+        return dyn.tip_dofs, np.bincount(dyn.tip_block_index, weights=D.ravel(), minlength=k * k).reshape(k, k)
 
     def assembled(self, st: NodalState):
         """``(f_int, tangent data)`` of the structure at ``st`` if :meth:`force` assembled them at that iterate (the
@@ -356,6 +387,22 @@ class WingDynamics:
         self.rot_diag = asm.diag_index[(6 * self.used_nodes[:, None] + np.arange(3, 6)[None, :]).ravel()]
         dof_r = np.repeat(np.arange(asm.n_dof), np.diff(asm.indptr))  # column of each pattern entry (CSC)
         self.tt_mask = ((asm.indices % 6 < 3) & (dof_r % 6 < 3)).astype(float)  # translation-translation entries
+        # the tip rods, a set of their own with the wing's properties: their tangents correct a kept factorisation
+        # (_StepLoad.tangent_change)
+        tip = np.flatnonzero(np.asarray(mesh.beam_kind) == BEAM_TIP)
+        self.tip_rods = None
+        if tip.size:
+            b = wing.beams
+            self.tip_rods = BeamSet(b.conn[tip], mesh.nodes, np.asarray(mesh.beam_up)[tip], b.EA[tip], b.EI2[tip],
+                                    b.EI3[tip], b.GJ[tip], backend=b.backend)
+            nodes = np.unique(b.conn[tip])
+            self.tip_dofs = (6 * nodes[:, None] + np.arange(6)).ravel()
+            pos = np.full(wing.n_dof, -1, dtype=np.int64)
+            pos[self.tip_dofs] = np.arange(self.tip_dofs.size)
+            ed = pos[(6 * b.conn[tip][:, :, None] + np.arange(6)).reshape(-1, 12)]  # (n_tip, 12) block positions
+            self.tip_block_index = (ed[:, :, None] * self.tip_dofs.size + ed[:, None, :]).ravel()
+            tr = np.arange(12) % 6 < 3
+            self.tip_tt = (tr[:, None] & tr[None, :]).astype(float)  # translation-translation entries (12, 12)
         if np.any(self.node_blocks[self.used_nodes] < 0):
             raise RuntimeError("the wing's tangent pattern lacks a nodal translation block")
         self.state: NodalState | None = None
@@ -417,6 +464,11 @@ class WingDynamics:
         ds = s - s.mean(axis=1, keepdims=True)
         m = x_sec.shape[1]
         return 1.0 / m + ds * ((s_p - s.mean(axis=1)) / np.einsum("ij,ij->i", ds, ds))[:, None]
+
+    def tip_tangents(self, st: NodalState) -> np.ndarray:
+        """Element tangents (n_tip, 12, 12) of the tip rods at ``st``."""
+        c = self.tip_rods.conn
+        return self.tip_rods.internal(st.x[c], st.Rn[c], tangent=True)[1]
 
     def update_mass(self, x: np.ndarray | None = None) -> None:
         """Nodal mass blocks (n_nodes, 3, 3) [kg] at the shape ``x`` (n_nodes, 3) [m] (default: the current one):

@@ -164,6 +164,10 @@ class StaticSolver:
         self._sel_cache: dict = {}
         self._lu = None
         self._lu_key = None
+        self._lu_snapshot = None  # what the load's tangent_change compares with, taken at the factorisation
+        self._lu_block = None  # dense block of the factorised tangent on the DOF of the load's tangent change
+        self._block_cache: dict = {}  # per (prescribed DOF, changed DOF): positions of the block (_block_correction)
+        self.n_block_corrections = 0
         self._diag_max = 0.0  # largest |K_ii| of the last assembled tangent (round-off floor of the residual)
         self._band_cache: dict = {}  # per set of prescribed DOF: banded-storage map or (None, None, None)
         self._condense_cache: dict = {}  # per (prescribed, free) DOF: data positions of the condensation blocks
@@ -324,9 +328,39 @@ class StaticSolver:
         ab[flat] = data[sel]
         return _BandedLU(ab.reshape(n_rows, free.size), bw)
 
+    def _block_correction(self, duf: np.ndarray, change: tuple, free: np.ndarray, key) -> None:
+        """Correct the Newton increment ``duf`` (free DOF, in place) of a kept factorisation for a change of the
+        tangent confined to a few DOF: ``change = (dofs, dT)``, the DOF (full numbering) and the dense change
+        ``dT`` of the tangent on them since the factorisation. With ``du1 = T_LU^-1 r`` the increment of the
+        updated tangent is ``du1 + e``, ``(T_LU + dT) e = -dT du1``; ``e`` is taken on the block alone,
+        ``(T_LU + dT)_bb e_b = -dT du1_b`` (one block-Jacobi sweep: the rest of the wing held), which costs a
+        dense solve of the block's size instead of a factorisation. The factorised tangent's block is read from
+        its data once per factorisation."""
+        dofs, dT = change
+        ck = (key, dofs.tobytes())
+        cache = self._block_cache.get(ck)
+        if cache is None:
+            pos = np.full(self.asm.n_dof, -1, dtype=np.int64)
+            pos[free] = np.arange(free.size)
+            keep = pos[dofs] >= 0  # (prescribed DOF are left out)
+            idx = self.asm.matrix(np.arange(1, self.asm.nnz + 1, dtype=float)).tocsr()[dofs[keep]][:, dofs[keep]]
+            cache = self._block_cache[ck] = (pos[dofs[keep]], keep, idx.toarray().astype(np.int64) - 1)
+        p, keep, idx = cache
+        if self._lu_block is None:
+            self._lu_block = np.append(self._lu_data, 0.0)[idx]  # (index -1: a structural zero)
+        if not keep.all():
+            dT = dT[np.ix_(keep, keep)]
+        du_b = duf[p]
+        try:
+            duf[p] = du_b + np.linalg.solve(self._lu_block + dT, -dT @ du_b)
+        except np.linalg.LinAlgError:
+            return  # (a singular block: the increment of the kept factorisation as it is)
+        self.n_block_corrections += 1
+
     def forget_factorization(self) -> None:
         self._lu = None
         self._lu_key = None
+        self._lu_snapshot = None
 
     def solve(self, state: NodalState, f_ext: np.ndarray | None, fixed_dofs=(), du_fixed=None,
               max_iter: int | None = None, allow_partial: bool = False, load=None, tol_force: float | None = None,
@@ -355,7 +389,11 @@ class StaticSolver:
             ``nnz``, see :meth:`Assembler.block_data`) of ``-d f_ext / d x``, added to the tangent whenever it is
             factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically. A load that had to
             assemble the structure at an iterate itself may hand the result over: ``load.assembled(state)`` returns
-            ``(f_int, tangent data)`` of that iterate, or None.
+            ``(f_int, tangent data)`` of that iterate, or None. A load whose tangent changes fast on a few DOF may keep a
+            factorisation useful for longer: ``load.tangent_snapshot(state)`` is taken where the tangent is
+            factorised, and ``load.tangent_change(state, snapshot)`` returns ``(dofs, dT)`` (the change of the
+            tangent on those DOF since then, dense) or None; the increments of a kept factorisation are corrected
+            for it (:meth:`_block_correction`).
         tol_force, tol_disp : float, optional
             Override the solver's tolerances for this call.
         accept_force : float, optional
@@ -455,11 +493,17 @@ class StaticSolver:
                     raise ConvergenceError(f"tangent factorisation failed: {exc}", history) from exc
                 self._lu_key = lu_key
                 self._lu_data = data
+                self._lu_block = None
+                self._lu_snapshot = load.tangent_snapshot(st) if hasattr(load, "tangent_snapshot") else None
                 self._lu_free = free
                 self.n_factorizations += 1
                 nfac += 1
             stale_step = not refactor
             duf = self._lu.solve(rf)
+            if not refactor and self._lu_snapshot is not None:
+                change = load.tangent_change(st, self._lu_snapshot)
+                if change is not None:
+                    self._block_correction(duf, change, free, key)
             if not np.all(np.isfinite(duf)):
                 history.append((it, rnorm, np.nan))
                 raise ConvergenceError("non-finite Newton increment (singular tangent?)", history)
