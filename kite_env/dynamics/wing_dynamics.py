@@ -52,6 +52,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry
@@ -81,6 +82,16 @@ def line_tension(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # for s < 0 the same value without the cancellation of s + root: eps^2 / (2 (root - s))
     T = np.where(s >= 0.0, 0.5 * (s + root), 0.5 * eps2 / (root - np.minimum(s, 0.0)))
     return T, 0.5 * (1.0 + s / root)
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors (np.cross's overhead is tens of microseconds)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    """The matrix ``[w]x`` of ``w x .`` (3, 3)."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 @dataclass(frozen=True)
@@ -185,11 +196,12 @@ class _StepLoad:
         # tangent is the structure's at the first iterate of the step, ``at`` (the Newton start), assembled in the
         # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
-        self.K0 = None
+        self.K0 = None  # beta K_T(at) on the translations (WingDynamics.translation_matrix)
+        self._kd_at = None  # the structure's tangent data at the Newton start
         self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
-            self.v_rigid = V[None, :] + np.cross(w[None, :], dyn.state.x)
+            self.v_rigid = V[None, :] + dyn.state.x @ _skew(w).T  # V + w x x
 
     def kinematics(self, st: NodalState):
         a = (st.x - self.x_pred) * self.c_a
@@ -225,8 +237,9 @@ class _StepLoad:
             asm = wing._mono_solvers["prescribed"].asm
             f_int, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
             self._pre = (st, f_int, kd)
-            self.K0_data = self.beta_K * kd * dyn.tt_mask
-            self.K0 = asm.matrix(self.K0_data)
+            self._kd_at = kd
+            # on the nodal translations alone (n_nodes * 3 DOF, node-major): the force's matrix-vector product
+            self.K0 = dyn.translation_matrix(self.beta_K * kd)
             if dyn.tip_rods is not None:
                 self.Kb_at = dyn.tip_tangents(st)
         x_sec = st.x[mesh.sections]
@@ -238,9 +251,7 @@ class _StepLoad:
         f = wing._load_vector(self.loads)
         f6 = f.reshape(-1, 6)
         if self.K0 is not None:
-            dv = np.zeros_like(f6)
-            dv[:, :3] = v - self.v_rigid
-            f -= self.K0 @ dv.ravel()
+            f6[:, :3] -= (self.K0 @ (v - self.v_rigid).ravel()).reshape(-1, 3)
         # bridle lines, Eq. (10), and their drag, Eq. (11) (half to the wing end)
         e, l, T, _ = self._lines(st.x, v)
         self.line = (T, l, e)
@@ -339,7 +350,7 @@ class _StepLoad:
         np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
         np.add.at(C, blk, ((dT * dyn.c_c)[:, None, None] * ee).ravel())
         if self.K0 is not None:
-            C += self.K0_data
+            C += self.beta_K * self._kd_at * dyn.tt_mask
         return K, C, M
 
 
@@ -386,7 +397,15 @@ class WingDynamics:
         self.has_rotary_inertia = bool(np.any(self.J_node > 0.0))
         self.rot_diag = asm.diag_index[(6 * self.used_nodes[:, None] + np.arange(3, 6)[None, :]).ravel()]
         dof_r = np.repeat(np.arange(asm.n_dof), np.diff(asm.indptr))  # column of each pattern entry (CSC)
+        sec = np.asarray(mesh.sections).ravel()
+        self._sections_partition = np.unique(sec).size == sec.size
         self.tt_mask = ((asm.indices % 6 < 3) & (dof_r % 6 < 3)).astype(float)  # translation-translation entries
+        # the translation-translation entries as a CSC matrix on the translations alone (translation_matrix)
+        tt = np.flatnonzero(self.tt_mask)
+        self._tt_entries = tt
+        self._tt_indices = (3 * (asm.indices[tt] // 6) + asm.indices[tt] % 6).astype(np.int32)
+        col_t = 3 * (dof_r[tt] // 6) + dof_r[tt] % 6
+        self._tt_indptr = np.searchsorted(col_t, np.arange(3 * n + 1)).astype(np.int32)
         # the tip rods, a set of their own with the wing's properties: their tangents correct a kept factorisation
         # (_StepLoad.tangent_change)
         tip = np.flatnonzero(np.asarray(mesh.beam_kind) == BEAM_TIP)
@@ -410,7 +429,7 @@ class WingDynamics:
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
-        self._rigid_fit: tuple | None = None  # (positions, mass, centre, offsets, inverse inertia) of rigid_velocity
+        self._rigid_fit: tuple | None = None  # (positions, mass, centre, mass-weighted offsets, inverse inertia)
         self.energy_consistent_membrane = cfg.structure.membrane_forces == "energy_consistent"
         if self.energy_consistent_membrane:  # scatter maps of the canopy's translations (membrane_force, ..._tangent_)
             sh = wing.shells
@@ -465,6 +484,12 @@ class WingDynamics:
         m = x_sec.shape[1]
         return 1.0 / m + ds * ((s_p - s.mean(axis=1)) / np.einsum("ij,ij->i", ds, ds))[:, None]
 
+    def translation_matrix(self, data: np.ndarray):
+        """The translation-translation part of pattern data (length ``nnz``) as a sparse matrix on the nodal
+        translations alone (``3 n_nodes`` DOF, node-major)."""
+        n = 3 * self.wing.mesh.n_nodes
+        return sp.csc_matrix((data[self._tt_entries], self._tt_indices, self._tt_indptr), shape=(n, n))
+
     def tip_tangents(self, st: NodalState) -> np.ndarray:
         """Element tangents (n_tip, 12, 12) of the tip rods at ``st``."""
         c = self.tip_rods.conn
@@ -488,7 +513,11 @@ class WingDynamics:
             trib[:, 1:] += 0.5 * seg
             share = m_a[:, None] * trib / trib.sum(axis=1, keepdims=True)  # (n_sec, m) [kg]
             nn = geom.e_z[:, :, None] * geom.e_z[:, None, :]
-            np.add.at(M, mesh.sections.ravel(), (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3))
+            add = (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3)
+            if self._sections_partition:  # (each node in one section: no repeated index)
+                M[mesh.sections.ravel()] += add
+            else:
+                np.add.at(M, mesh.sections.ravel(), add)
         self.M_blocks = M
 
     # ------------------------------------------------------------------ state
@@ -614,13 +643,14 @@ class WingDynamics:
             M = m.sum()
             c = (m @ x) / M
             r = x - c
-            J = np.einsum("n,nk,nk->", m, r, r) * np.eye(3) - np.einsum("n,ni,nj->ij", m, r, r)
-            fit = self._rigid_fit = (x, M, c, r, np.linalg.inv(J))
-        _, M, c, r, J_inv = fit
+            mr = m[:, None] * r
+            B = mr.T @ r  # sum m r r^T
+            fit = self._rigid_fit = (x, M, c, mr, np.linalg.inv(np.trace(B) * np.eye(3) - B))
+        _, M, c, mr, J_inv = fit
         vc = (m @ v) / M
-        H = np.einsum("n,nk->k", m, np.cross(r, v - vc))
-        w = J_inv @ H
-        return vc - np.cross(w, c), w
+        A = mr.T @ v  # H = sum m r x (v - vc) = sum m r x v (sum m r = 0): the skew part of sum m r v^T
+        w = J_inv @ np.array([A[1, 2] - A[2, 1], A[2, 0] - A[0, 2], A[0, 1] - A[1, 0]])
+        return vc - _cross3(w, c), w
 
     def kinetic_energy(self) -> float:
         """``1/2 sum v . M v + 1/2 sum J |w|^2`` [J] with the current mass blocks (structural and added mass) and the

@@ -316,7 +316,8 @@ class StaticSolver:
             bw = int(np.max(np.abs(ind - cols))) if ind.size else 0
             if self.banded and free.size >= 64 and 8 * bw < free.size:
                 rows_ab = 2 * bw + bw  # LAPACK storage: 2 kl + ku + 1 rows with kl = ku = bw
-                band = (bw, (bw + bw + ind - cols) * free.size + cols, rows_ab + 1)
+                # position in the Fortran-ordered (column-major) band array that dgbtrf factorises in place
+                band = (bw, (bw + bw + ind - cols) + cols * (rows_ab + 1), rows_ab + 1)
             else:
                 band = (None, None, None)
             self._band_cache[key] = band
@@ -326,7 +327,7 @@ class StaticSolver:
             return spla.splu(Kff, permc_spec="COLAMD", options={"SymmetricMode": False})
         ab = np.zeros(n_rows * free.size)
         ab[flat] = data[sel]
-        return _BandedLU(ab.reshape(n_rows, free.size), bw)
+        return _BandedLU(ab.reshape(free.size, n_rows).T, bw)  # (a view in Fortran order: no copy)
 
     def _block_correction(self, duf: np.ndarray, change: tuple, free: np.ndarray, key) -> None:
         """Correct the Newton increment ``duf`` (free DOF, in place) of a kept factorisation for a change of the
