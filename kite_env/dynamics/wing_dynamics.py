@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry
 from kite_env.dynamics.particles import line_drag
@@ -65,6 +66,8 @@ from kite_env.structure.kernels import relative_rotation_vectors
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
+
+_UNIT_X = np.array([1.0, 0.0, 0.0])
 
 #: width of the smoothed pull-only law of the bridle lines [N] (:func:`line_tension`)
 LINE_SMOOTHING_N = 10.0
@@ -505,7 +508,11 @@ class WingDynamics:
         f = wing.cfg.structure.added_mass_factor
         if f > 0.0:
             x_sec = (self.state.x if x is None else x)[mesh.sections]
-            geom = section_geometry(x_sec, mesh.section_tube_d)
+            if self.compiled:  # the same frames from the compiled section kernel (its loads unused)
+                geom = section_loads_fields(x_sec, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
+                                            _UNIT_X, 1.0)[11]
+            else:
+                geom = section_geometry(x_sec, mesh.section_tube_d)
             m_a = added_mass(mesh, geom, wing.cfg.aero.rho_kg_m3, f, wing.aspect_ratio)
             seg = np.linalg.norm(np.diff(x_sec, axis=1), axis=2)
             trib = np.zeros(mesh.sections.shape)
