@@ -5,6 +5,7 @@
     python scripts/flight_experiments.py openloop --dl 0.3 [--duration 4]
     python scripts/flight_experiments.py trim --shorten 0.06 [--duration 8]
     python scripts/flight_experiments.py damp --factor 100 [--duration 25]
+    python scripts/flight_experiments.py timestep [--duration 10] [--steps 0.005,0.01,0.0025] [--set k=v ...]
 
 branch    fly the baseline closed loop to --at, then fly deep copies for --hold seconds with the steering held and one
           change each; prints the right tip's alpha peak-to-peak per quarter and how each copy ends.
@@ -13,6 +14,9 @@ eig       linearised step map at --at (particle state, central differences over 
 openloop  steering rest-length difference --dl held from t = 0.5 s, no controller: tip and mid angles of attack.
 trim      both steering rest lengths shortened by --shorten after the reset, then the baseline: mu and alpha.
 damp      the pair dampers (A-C, B-D, A-D, B-C) multiplied by --factor after the reset, then the baseline.
+timestep  the baseline (kite-eval's flight) at each time step of --steps: Newton iterations per step, and against the
+          first step the largest distance of the KCU at the common instants and the mean traction after 1 s
+          (issue 19's time-step check; docs/flight_model.md, sections 19 and 23).
 """
 
 from __future__ import annotations
@@ -208,10 +212,37 @@ def damp(args):
     _fly_modified(args, modify)
 
 
+def timestep(args):
+    from kite_env import flight
+    from kite_env.config import load_config
+
+    steps = [float(v) for v in args.steps.split(",")]
+    series = {}
+    for dt in steps:
+        cfg = load_config(None, list(args.set) + [f"dynamics.dt_s={dt}"])
+        log = flight.fly(cfg, duration_s=args.duration)
+        se = log.series
+        series[dt] = se
+        print(f"dt {1e3 * dt:g} ms: {log.meta.get('termination_reason') or 'completed'}, Newton iterations per step "
+              f"{np.mean(se['newton_iters'][1:]):.2f}", flush=True)
+    ref = series[steps[0]]
+    at = {round(float(t), 6): i for i, t in enumerate(ref["t"])}
+    for dt in steps[1:]:
+        se = series[dt]
+        pairs = [(at[round(float(t), 6)], j) for j, t in enumerate(se["t"]) if round(float(t), 6) in at]
+        gap = max(float(np.linalg.norm(ref["r"][i, 4] - se["r"][j, 4])) for i, j in pairs)
+        late = [(i, j) for i, j in pairs if ref["t"][i] > 1.0] or pairs  # (after the start, where there is one)
+        F0 = np.nanmean([ref["tether_force"][i] for i, _ in late])
+        F1 = np.nanmean([se["tether_force"][j] for _, j in late])
+        print(f"dt {1e3 * dt:g} ms against {1e3 * steps[0]:g} ms: KCU gap max {100 * gap:.2f} cm, mean traction "
+              f"{100 * (F1 / F0 - 1):+.3f} % ({len(pairs)} common instants)")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
-    for name, fn in (("branch", branch), ("eig", eig), ("openloop", openloop), ("trim", trim), ("damp", damp)):
+    for name, fn in (("branch", branch), ("eig", eig), ("openloop", openloop), ("trim", trim), ("damp", damp),
+                     ("timestep", timestep)):
         q = sub.add_parser(name)
         q.set_defaults(fn=fn)
         q.add_argument("--set", action="append", default=[], help="config override section.key=value (repeatable)")
@@ -230,6 +261,9 @@ def main(argv=None) -> int:
             q.add_argument("--shorten", type=float, default=0.06, help="both steering rest lengths shorter by [m]")
         if name == "damp":
             q.add_argument("--factor", type=float, default=100.0, help="pair-damper factor")
+        if name == "timestep":
+            q.add_argument("--duration", type=float, default=10.0)
+            q.add_argument("--steps", default="0.005,0.01,0.0025", help="time steps [s], the first the reference")
     args = p.parse_args(argv)
     bad = [v for v in args.__dict__.get("variants", "all").split(",") if v != "all" and v not in _variants()]
     if bad:

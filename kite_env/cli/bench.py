@@ -15,6 +15,8 @@ import argparse
 import sys
 import time
 
+import numpy as np
+
 from kite_env.config import ConfigError
 
 
@@ -30,20 +32,26 @@ def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "
     obs, _ = env.reset(seed=seed)
     t_reset = time.perf_counter() - t0
     start, wall, steps, resets = True, 0.0, 0, 0
+    newton = []
     while steps < n_steps:
         a, _ = agent.predict(obs, episode_start=start)
         start = False
         t0 = time.perf_counter()
-        obs, _, term, trunc, _ = env.step(a)
+        obs, _, term, trunc, info = env.step(a)
         wall += time.perf_counter() - t0
+        newton += info.get("newton_iters", [])
         steps += 1
         if term or trunc:
             obs, _ = env.reset(seed=seed + resets + 1)
             resets += 1
             start = True
     sim = steps * env.control_dt
-    return {"env_steps_per_s": steps / wall, "real_time_factor": wall / sim, "steps": steps,
-            "control_dt_s": env.control_dt, "reset_s": t_reset, "resets_during_run": resets}
+    out = {"env_steps_per_s": steps / wall, "real_time_factor": wall / sim, "steps": steps,
+           "control_dt_s": env.control_dt, "reset_s": t_reset, "resets_during_run": resets}
+    if newton:  # the full model's wing: Newton iterations per physics step
+        out.update(newton_iters_mean=float(np.mean(newton)), newton_iters_p99=float(np.percentile(newton, 99)),
+                   newton_iters_max=int(np.max(newton)))
+    return out
 
 
 def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: int = 0, config=None) -> dict:
@@ -107,7 +115,10 @@ def main(argv=None) -> int:
             print(f"{name:<10} {r['kite_steps_per_s']:>12.1f} {r['real_time_factor']:>17.4f} {'-':>10}"
                   f"  ({r['n_kites']} kites: kite-steps/s, wall per simulated second of all kites)")
         else:
-            print(f"{name:<10} {r['env_steps_per_s']:>12.1f} {r['real_time_factor']:>17.4f} {r['reset_s']:>10.2f}")
+            newton = (f"  Newton iterations per step {r['newton_iters_mean']:.2f} (p99 {r['newton_iters_p99']:.0f}, max "
+                      f"{r['newton_iters_max']})" if "newton_iters_mean" in r else "")
+            print(f"{name:<10} {r['env_steps_per_s']:>12.1f} {r['real_time_factor']:>17.4f} {r['reset_s']:>10.2f}"
+                  + newton)
     write_json(args.out, "bench.json", result)
     print(f"kite-bench: wrote {args.out}/bench.json")
     return 0

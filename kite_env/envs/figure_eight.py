@@ -286,6 +286,7 @@ class KiteFigureEightEnv(gym.Env):
         # a slack tether ends the episode on a rod; the default rope goes slack and flies on (the quasi-static wing's
         # tether is always the rod)
         slack_ends = cfg.dynamics.tether == "rod" or not cfg.structure.dynamic
+        newton = []  # Newton iterations of each physics step's FE wing (none from the surrogate)
         for _ in range(self.n_physics):
             t0 = time.perf_counter()
             try:
@@ -294,6 +295,8 @@ class KiteFigureEightEnv(gym.Env):
                 reason, detail = exc.reason, exc.detail
                 break
             self.rec = rec
+            if self.sim.fidelity_now == "fe":
+                newton.append(int(rec.wing.newton_iters))
             if self.recorder is not None:
                 self.recorder.record(rec, self.L_B, self.L_D, ainfo, time.perf_counter() - t0)
             r_kcu = rec.state.r[4]
@@ -318,6 +321,8 @@ class KiteFigureEightEnv(gym.Env):
         info = {**terms, **feats, "delta_l_star_m": ainfo["delta_l_star"], "L_B_m": self.L_B, "L_D_m": self.L_D,
                 "termination_reason": reason if terminated else ("time limit" if truncated else None),
                 "fidelity": self.sim.fidelity_now, "substepped_steps": self.substepped_steps}
+        if newton:
+            info["newton_iters"] = newton
         if detail:
             info["termination_detail"] = detail
         self._trail.append(self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4]))

@@ -35,3 +35,13 @@ def test_bench_flight_script_rejects_bad_input_and_writes_nothing(tmp_path):
     assert res.returncode == 0, res.stderr
     data = json.loads((out / "bench_flight.json").read_text())
     assert data["flight"][0]["dt_ms"] == 10.0 and data["paper_real_time_factor"] == 27.5
+
+
+def test_kite_bench_reports_the_full_models_newton_iterations():
+    """kite-bench's fe row: wall time per simulated second and the Newton iterations per physics step (issues 19/20's
+    speed targets: mean below 2, p99 below 10) from the env's ``info["newton_iters"]``."""
+    from kite_env.cli.bench import bench_env
+
+    r = bench_env(3)
+    assert r["steps"] == 3 and r["real_time_factor"] > 0.0
+    assert 1.0 <= r["newton_iters_mean"] <= r["newton_iters_p99"] <= r["newton_iters_max"] <= 30

@@ -74,6 +74,8 @@ def test_reward_terms_sum_and_info():
         assert r == pytest.approx(sum(parts), rel=0, abs=1e-12)
         assert info["reward_action"] < 0.0  # the action changed
         assert 0.0 < info["reward_tracking"] <= 1.0 and info["reward_traction"] > 0.0
+        # the Newton iterations of each physics step's FE wing (kite-bench's mean and p99)
+        assert len(info["newton_iters"]) == env.n_physics and all(1 <= n <= 30 for n in info["newton_iters"])
     assert info["t"] == pytest.approx(3 * env.control_dt)
 
 
