@@ -115,8 +115,8 @@ def main(argv=None) -> int:
             print(f"{name:<10} {r['kite_steps_per_s']:>12.1f} {r['real_time_factor']:>17.4f} {'-':>10}"
                   f"  ({r['n_kites']} kites: kite-steps/s, wall per simulated second of all kites)")
         else:
-            newton = (f"  Newton iterations per step {r['newton_iters_mean']:.2f} (p99 {r['newton_iters_p99']:.0f}, max "
-                      f"{r['newton_iters_max']})" if "newton_iters_mean" in r else "")
+            newton = (f"  Newton iterations per step {r['newton_iters_mean']:.2f} (p99 {r['newton_iters_p99']:.0f}, "
+                      f"max {r['newton_iters_max']})" if "newton_iters_mean" in r else "")
             print(f"{name:<10} {r['env_steps_per_s']:>12.1f} {r['real_time_factor']:>17.4f} {r['reset_s']:>10.2f}"
                   + newton)
     write_json(args.out, "bench.json", result)

@@ -390,8 +390,8 @@ class StaticSolver:
             ``nnz``, see :meth:`Assembler.block_data`) of ``-d f_ext / d x``, added to the tangent whenever it is
             factorised. The residual ``f_ext(x) - f_int(x)`` is then solved monolithically. A load that had to
             assemble the structure at an iterate itself may hand the result over: ``load.assembled(state)`` returns
-            ``(f_int, tangent data)`` of that iterate, or None. A load whose tangent changes fast on a few DOF may keep a
-            factorisation useful for longer: ``load.tangent_snapshot(state)`` is taken where the tangent is
+            ``(f_int, tangent data)`` of that iterate, or None. A load whose tangent changes fast on a few DOF may
+            keep a factorisation useful for longer: ``load.tangent_snapshot(state)`` is taken where the tangent is
             factorised, and ``load.tangent_change(state, snapshot)`` returns ``(dofs, dT)`` (the change of the
             tangent on those DOF since then, dense) or None; the increments of a kept factorisation are corrected
             for it (:meth:`_block_correction`).
@@ -501,7 +501,7 @@ class StaticSolver:
                 nfac += 1
             stale_step = not refactor
             duf = self._lu.solve(rf)
-            if not refactor and self._lu_snapshot is not None:
+            if not refactor and self._lu_snapshot is not None and hasattr(load, "tangent_change"):
                 change = load.tangent_change(st, self._lu_snapshot)
                 if change is not None:
                     self._block_correction(duf, change, free, key)
