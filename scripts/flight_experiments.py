@@ -216,7 +216,17 @@ def timestep(args):
     from kite_env import flight
     from kite_env.config import load_config
 
-    steps = [float(v) for v in args.steps.split(",")]
+    try:
+        steps = [float(v) for v in args.steps.split(",")]
+    except ValueError:
+        steps = []
+    if len(steps) < 2 or not all(dt > 0 for dt in steps):
+        print(f"flight_experiments: error: --steps needs two or more positive time steps [s] (e.g. 0.005,0.01), got "
+              f"{args.steps!r}", file=sys.stderr)
+        return 2
+    if not args.duration > 0:
+        print(f"flight_experiments: error: --duration must be positive, got {args.duration}", file=sys.stderr)
+        return 2
     series = {}
     for dt in steps:
         cfg = load_config(None, list(args.set) + [f"dynamics.dt_s={dt}"])
@@ -269,8 +279,7 @@ def main(argv=None) -> int:
     if bad:
         print(f"flight_experiments: error: unknown variant(s) {bad}; choose from {list(_variants())}", file=sys.stderr)
         return 2
-    args.fn(args)
-    return 0
+    return args.fn(args) or 0
 
 
 if __name__ == "__main__":

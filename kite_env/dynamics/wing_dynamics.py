@@ -56,9 +56,10 @@ import scipy.sparse as sp
 
 from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
-from kite_env.aero.sections import section_geometry
+from kite_env.aero.sections import section_geometry, skew
 from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
+from kite_env.frames import cross
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.geometry.mesh import BEAM_TIP
 from kite_env.structure.beam import BeamSet
@@ -85,16 +86,6 @@ def line_tension(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # for s < 0 the same value without the cancellation of s + root: eps^2 / (2 (root - s))
     T = np.where(s >= 0.0, 0.5 * (s + root), 0.5 * eps2 / (root - np.minimum(s, 0.0)))
     return T, 0.5 * (1.0 + s / root)
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` of two 3-vectors (np.cross's overhead is tens of microseconds)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _skew(w: np.ndarray) -> np.ndarray:
-    """The matrix ``[w]x`` of ``w x .`` (3, 3)."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 @dataclass(frozen=True)
@@ -204,7 +195,7 @@ class _StepLoad:
         self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
-            self.v_rigid = V[None, :] + dyn.state.x @ _skew(w).T  # V + w x x
+            self.v_rigid = V[None, :] + dyn.state.x @ skew(w).T  # V + w x x
 
     def kinematics(self, st: NodalState):
         a = (st.x - self.x_pred) * self.c_a
@@ -657,7 +648,7 @@ class WingDynamics:
         vc = (m @ v) / M
         A = mr.T @ v  # H = sum m r x (v - vc) = sum m r x v (sum m r = 0): the skew part of sum m r v^T
         w = J_inv @ np.array([A[1, 2] - A[2, 1], A[2, 0] - A[0, 2], A[0, 1] - A[1, 0]])
-        return vc - _cross3(w, c), w
+        return vc - cross(w, c), w
 
     def kinetic_energy(self) -> float:
         """``1/2 sum v . M v + 1/2 sum J |w|^2`` [J] with the current mass blocks (structural and added mass) and the
