@@ -471,3 +471,39 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
         _pair_update(v, i, j, wi, wj, (d0 * u0 + d1 * u1 + d2 * u2 - target)
                      / ((d0 * d0 + d1 * d1 + d2 * d2) * (wi + wj)), d0, d1, d2)
     return r, v
+
+
+@njit(**_JIT)
+def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out):
+    """The bridle lines' pull on the KCU and its half of their drag (3,) [N] into ``out``: what
+    :meth:`kite_env.dynamics.dynamic_simulator.DynamicFlightSimulator._kcu_acceleration` adds with NumPy, the
+    smoothed pull-only tension of Eq. (10) (:func:`kite_env.dynamics.wing_dynamics.line_tension`, width ``eps``
+    [N]) along each line A-D -> KCU and half of Eq. (11)'s drag (:func:`kite_env.dynamics.particles.line_drag`,
+    ``drag_coef = -1/2 rho C_D d``) with the apparent wind of the lines' mean velocity minus the mean of the wind
+    at their ends (``wind`` (5, 3): A-D, KCU). ``r_b``, ``v_b`` (4, 3): A-D; ``r_k``, ``v_k`` (3,): the KCU."""
+    eps2 = eps * eps
+    f0, f1, f2 = 0.0, 0.0, 0.0
+    d0, d1, d2 = 0.0, 0.0, 0.0
+    for i in range(4):
+        a0, a1, a2 = r_b[i, 0] - r_k[0], r_b[i, 1] - r_k[1], r_b[i, 2] - r_k[2]
+        l = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        e0, e1, e2 = a0 / l, a1 / l, a2 / l
+        ld = e0 * (v_b[i, 0] - v_k[0]) + e1 * (v_b[i, 1] - v_k[1]) + e2 * (v_b[i, 2] - v_k[2])
+        s = k_c * (l - rest[i]) + c_c * ld
+        root = math.sqrt(s * s + eps2)
+        T = 0.5 * (s + root) if s >= 0.0 else 0.5 * eps2 / (root - s)
+        f0 += T * e0
+        f1 += T * e1
+        f2 += T * e2
+        va0 = 0.5 * (v_b[i, 0] + v_k[0]) - 0.5 * (wind[i, 0] + wind[4, 0])
+        va1 = 0.5 * (v_b[i, 1] + v_k[1]) - 0.5 * (wind[i, 1] + wind[4, 1])
+        va2 = 0.5 * (v_b[i, 2] + v_k[2]) - 0.5 * (wind[i, 2] + wind[4, 2])
+        p = va0 * e0 + va1 * e1 + va2 * e2
+        n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
+        g = drag_coef * (l * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2))
+        d0 += g * n0
+        d1 += g * n1
+        d2 += g * n2
+    out[0] = f0 + 0.5 * d0
+    out[1] = f1 + 0.5 * d1
+    out[2] = f2 + 0.5 * d2

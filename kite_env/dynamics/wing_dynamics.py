@@ -63,7 +63,7 @@ from kite_env.frames import cross
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.geometry.mesh import BEAM_TIP
 from kite_env.structure.beam import BeamSet
-from kite_env.structure.kernels import relative_rotation_vectors
+from kite_env.structure.kernels import csc_gather_matvec, relative_rotation_vectors
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
@@ -190,8 +190,7 @@ class _StepLoad:
         # tangent is the structure's at the first iterate of the step, ``at`` (the Newton start), assembled in the
         # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
-        self.K0 = None  # beta K_T(at) on the translations (WingDynamics.translation_matrix)
-        self._kd_at = None  # the structure's tangent data at the Newton start
+        self.K0 = None  # the structure's tangent data K_T(at) at the Newton start (beta K_T on the translations)
         self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
@@ -231,9 +230,7 @@ class _StepLoad:
             asm = wing._mono_solvers["prescribed"].asm
             f_int, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
             self._pre = (st, f_int, kd)
-            self._kd_at = kd
-            # on the nodal translations alone (n_nodes * 3 DOF, node-major): the force's matrix-vector product
-            self.K0 = dyn.translation_matrix(self.beta_K * kd)
+            self.K0 = kd  # (on the nodal translations alone in the force: WingDynamics.translation_product)
             if dyn.tip_rods is not None:
                 self.Kb_at = dyn.tip_tangents(st)
         x_sec = st.x[mesh.sections]
@@ -245,7 +242,7 @@ class _StepLoad:
         f = wing._load_vector(self.loads)
         f6 = f.reshape(-1, 6)
         if self.K0 is not None:
-            f6[:, :3] -= (self.K0 @ (v - self.v_rigid).ravel()).reshape(-1, 3)
+            f6[:, :3] -= dyn.translation_product(self.K0, self.beta_K, v - self.v_rigid)
         # bridle lines, Eq. (10), and their drag, Eq. (11) (half to the wing end)
         e, l, T, _ = self._lines(st.x, v)
         self.line = (T, l, e)
@@ -344,7 +341,7 @@ class _StepLoad:
         np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
         np.add.at(C, blk, ((dT * dyn.c_c)[:, None, None] * ee).ravel())
         if self.K0 is not None:
-            C += self.beta_K * self._kd_at * dyn.tt_mask
+            C += self.beta_K * self.K0 * dyn.tt_mask
         return K, C, M
 
 
@@ -483,6 +480,16 @@ class WingDynamics:
         translations alone (``3 n_nodes`` DOF, node-major)."""
         n = 3 * self.wing.mesh.n_nodes
         return sp.csc_matrix((data[self._tt_entries], self._tt_indices, self._tt_indptr), shape=(n, n))
+
+    def translation_product(self, data: np.ndarray, scale: float, u: np.ndarray) -> np.ndarray:
+        """``(scale T) u`` (n_nodes, 3) with ``T = translation_matrix(data)`` and ``u`` (n_nodes, 3): the same
+        product, compiled, without building the matrix (the Rayleigh damping's force at every Newton iterate)."""
+        u = np.ascontiguousarray(u, dtype=float).reshape(-1)
+        if not self.compiled:
+            return (self.translation_matrix(scale * data) @ u).reshape(-1, 3)
+        out = np.empty_like(u)
+        csc_gather_matvec(data, self._tt_entries, self._tt_indices, self._tt_indptr, float(scale), u, out)
+        return out.reshape(-1, 3)
 
     def tip_tangents(self, st: NodalState) -> np.ndarray:
         """Element tangents (n_tip, 12, 12) of the tip rods at ``st``."""

@@ -163,6 +163,14 @@ class BeamSet:
         ``g_bend``, ``g_twist`` (len(rows),) [1/(N m)]: the material part of the tangent of a secant law whose
         stiffness depends on the deformation, ``dm/dtheta = K_l + g m m^T`` over the bending (y, z of both ends) and
         the twist components of the local moments ``m``; None = 0 (the secant alone)."""
+        if self.backend == "numba":
+            from .kernels import beam_set_bending_torsion
+
+            empty = np.zeros(0)
+            beam_set_bending_torsion(rows, EI, GJ, empty if g_bend is None else g_bend,
+                                     empty if g_twist is None else g_twist, self.L0, self.EI2, self.EI3, self.GJ,
+                                     self._k11, self._k12, self._kmat)
+            return
         self.EI2[rows] = EI
         self.EI3[rows] = EI
         self.GJ[rows] = GJ

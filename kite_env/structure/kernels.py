@@ -346,6 +346,43 @@ def scatter_add(out, index, values):
 
 
 @njit(**_JIT)
+def beam_set_bending_torsion(rows, EI, GJ, g_bend, g_twist, L0, EI2, EI3, GJ_out, k11, k12, kmat):
+    """``BeamSet.set_bending_torsion`` in one loop (the inflated tubes' secant stiffness, set at every iterate):
+    ``EI2 = EI3 = EI``, ``GJ`` and the diagonal local blocks ``k11 = (GJ, 4 EI, 4 EI) / L0``, ``k12 = (-GJ, 2 EI,
+    2 EI) / L0`` of the beams ``rows``, and the material terms ``kmat = (g_bend, g_twist)`` (zero-length arrays:
+    0). The same operations as the NumPy method, so the same bits."""
+    has_b, has_t = g_bend.shape[0] > 0, g_twist.shape[0] > 0
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        ei, gj = EI[i], GJ[i]
+        EI2[r] = ei
+        EI3[r] = ei
+        GJ_out[r] = gj
+        iL = 1.0 / L0[r]
+        k11[r, 0] = gj * iL
+        k11[r, 1] = 4.0 * ei * iL
+        k11[r, 2] = 4.0 * ei * iL
+        k12[r, 0] = -gj * iL
+        k12[r, 1] = 2.0 * ei * iL
+        k12[r, 2] = 2.0 * ei * iL
+        kmat[r, 0] = g_bend[i] if has_b else 0.0
+        kmat[r, 1] = g_twist[i] if has_t else 0.0
+
+
+@njit(**_JIT)
+def csc_gather_matvec(data, entries, indices, indptr, scale, x, out):
+    """``out = (scale A) x`` for the CSC matrix ``A`` whose values are ``data[entries]`` (a sub-pattern of a larger
+    pattern's data, e.g. its translation-translation entries) with ``indices`` and ``indptr``: scipy's product of
+    ``csc_matrix((scale * data[entries], indices, indptr))`` in the same order of operations, without gathering
+    the values into a new matrix. ``out`` (length of ``x``) is overwritten."""
+    out[:] = 0.0
+    for j in range(indptr.shape[0] - 1):
+        xj = x[j]
+        for k in range(indptr[j], indptr[j + 1]):
+            out[indices[k]] += (scale * data[entries[k]]) * xj
+
+
+@njit(**_JIT)
 def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, kmat, f_out, K_out, U_out, want_K=True):
     """Co-rotational Euler-Bernoulli beams, as :meth:`kite_env.structure.beam.BeamSet.internal`.
 

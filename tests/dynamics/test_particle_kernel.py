@@ -233,3 +233,33 @@ def test_projection_onto_a_reeling_tether(seed):
     np.testing.assert_allclose(v_nb, v_ref, rtol=1e-13, atol=1e-10)
     assert np.linalg.norm(r_nb[KCU]) == pytest.approx(83.0, abs=1e-9)
     assert r_nb[KCU] @ v_nb[KCU] / 83.0 == pytest.approx(2.5, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_kcu_line_force_matches_the_numpy_lines(seed):
+    """kcu_line_force (the full model's KCU step) = the smoothed pull-only tension of Eq. (10) along each bridle line
+    plus half of Eq. (11)'s drag, as DynamicFlightSimulator computes them with NumPy (line_tension, line_drag), to
+    round-off; one line slack (its tension the smoothing's few newtons) and one stretched so that both branches of
+    the law are taken."""
+    from kite_env.dynamics.kernels import kcu_line_force
+    from kite_env.dynamics.particles import line_drag
+    from kite_env.dynamics.wing_dynamics import LINE_SMOOTHING_N, line_tension
+
+    rng = np.random.default_rng(seed)
+    r_k = np.array([60.0, 5.0, 70.0]) + rng.normal(size=3)
+    r_b = r_k + np.array([0.0, 0.0, 11.0]) + Q0 + 0.05 * rng.normal(size=(4, 3))
+    v_k = rng.normal(scale=20.0, size=3)
+    v_b = v_k + rng.normal(scale=2.0, size=(4, 3))
+    wind = np.array([8.0, 0.0, 0.0]) + rng.normal(size=(5, 3))
+    l0 = np.linalg.norm(r_b - r_k, axis=1)
+    rest = l0 - np.array([0.2, -1.0, 0.1, 0.0])  # line B 1 m too long: slack
+    k_c, c_c, coef = 6e4, 1e2, -0.5 * 1.225 * 1.1 * 2.5e-3
+    out = np.full(3, np.nan)
+    kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, coef, LINE_SMOOTHING_N, out)
+    dl = r_b - r_k
+    l = np.linalg.norm(dl, axis=1)
+    e = dl / l[:, None]
+    T, _ = line_tension(k_c * (l - rest) + c_c * np.einsum("ij,ij->i", e, v_b - v_k))
+    assert T[1] < LINE_SMOOTHING_N and T[0] > 1e3
+    ref = T @ e + 0.5 * line_drag(coef, 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4]), e, l).sum(axis=0)
+    assert np.allclose(out, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
