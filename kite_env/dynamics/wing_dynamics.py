@@ -258,6 +258,8 @@ class _StepLoad:
             aw_m = (1.0 - p.alpha_m) * aw + p.alpha_m * dyn.aw
             f6[:, 3:] -= dyn.J_node[:, None] * aw_m / (1.0 - p.alpha_f)
         f -= (p.alpha_f / (1.0 - p.alpha_f)) * dyn.r_prev
+        if dyn.carry is not None:  # the last step's unbalanced residual, with its impulse over this step
+            f += dyn.carry[0] * (dyn.carry[1] / self.dt)
         if self.f_m0 is not None:
             # the membrane's averaged force (1 - alpha_f) f_m(x_n+1) + alpha_f f_m(x_n) of the equation above becomes
             # the discrete gradient f_alg(x_n, x_n+1), whose work is the change of the stored energy
@@ -417,6 +419,9 @@ class WingDynamics:
             raise RuntimeError("the wing's tangent pattern lacks a nodal translation block")
         self.state: NodalState | None = None
         self.v = self.a = self.r_prev = None
+        # (rho, dt) of the last step: the residual its Newton left (free DOF; structure.carry_residual) and its step
+        self.carry: tuple | None = None
+        self.carry_residual = bool(cfg.structure.carry_residual)
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
@@ -535,6 +540,7 @@ class WingDynamics:
         self.v = np.asarray(v_nodes, float).copy()
         self.a = np.zeros_like(self.v)
         self.r_prev = np.zeros(self.wing.n_dof)
+        self.carry = None
         self.w = np.zeros_like(self.v)  # (the start's load: no rotation over its "step")
         self.aw = np.zeros_like(self.v)
         self.update_mass()
@@ -567,6 +573,8 @@ class WingDynamics:
         self.aw = self.aw @ Q.T
         r6 = self.r_prev.reshape(-1, 2, 3) @ Q.T
         self.r_prev = r6.reshape(-1)
+        if self.carry is not None:
+            self.carry = ((self.carry[0].reshape(-1, 2, 3) @ Q.T).reshape(-1), self.carry[1])
         self.wing.state = self.state
         if self._prev is not None:
             prev, dt_prev = self._prev
@@ -610,6 +618,14 @@ class WingDynamics:
                         "factorizations": res.factorizations, "accepted": res.accepted, "method": "dynamic"})
         self._prev = (self.state, dt)
         self.state, self.v, self.a, self.r_prev = st, v, a, r
+        if self.carry_residual:
+            # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance;
+            # on the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the
+            # momentum that a step misses is delivered one step late and the misses do not add up over a flight
+            rho = -res.reactions
+            rho[self.solver.auto_fixed] = 0.0
+            rho[self.held_dofs] = 0.0
+            self.carry = (rho, dt)
         self.w, self.aw = w, aw
         wing.state = st
         T, _, e = load.line
