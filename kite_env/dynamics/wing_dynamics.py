@@ -421,7 +421,7 @@ class WingDynamics:
         self.v = self.a = self.r_prev = None
         # (rho, dt) of the last step: the residual its Newton left (free DOF; structure.carry_residual) and its step
         self.carry: tuple | None = None
-        self.carry_residual = bool(cfg.structure.carry_residual)
+        self.carry_residual = cfg.structure.carry_residual
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
@@ -618,14 +618,15 @@ class WingDynamics:
                         "factorizations": res.factorizations, "accepted": res.accepted, "method": "dynamic"})
         self._prev = (self.state, dt)
         self.state, self.v, self.a, self.r_prev = st, v, a, r
-        if self.carry_residual:
+        if self.carry_residual != "none":
             # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance;
             # on the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the
-            # momentum that a step misses is delivered one step late and the misses do not add up over a flight
+            # momentum that a step misses is delivered one step late and the misses do not add up over a flight.
+            # "sections": only what moves the sections as a whole (section_resultant_load; docs section 24)
             rho = -res.reactions
             rho[self.solver.auto_fixed] = 0.0
             rho[self.held_dofs] = 0.0
-            self.carry = (rho, dt)
+            self.carry = (self.section_resultant_load(rho) if self.carry_residual == "sections" else rho, dt)
         self.w, self.aw = w, aw
         wing.state = st
         T, _, e = load.line
@@ -672,6 +673,31 @@ class WingDynamics:
         A = mr.T @ v  # H = sum m r x (v - vc) = sum m r x v (sum m r = 0): the skew part of sum m r v^T
         w = J_inv @ np.array([A[1, 2] - A[2, 1], A[2, 0] - A[0, 2], A[0, 1] - A[1, 0]])
         return vc - cross(w, c), w
+
+    def section_resultant_load(self, rho: np.ndarray) -> np.ndarray:
+        """The part of a nodal load ``rho`` (n_dof,) that each chordwise section carries as a whole: per section,
+        the nodal forces ``f_j = m_j (A + alpha x r_j)`` (n_dof,; translations only) with the section's resultant
+        force and its moment about the section's mass centre (forces and the moments at the rotational DOF), the
+        section's nodes ``j`` at ``r_j`` from that centre with their structural masses ``m_j`` (a rigid section's
+        inertial load). The moment about the section's axis of least inertia, its chord line, is left out: the
+        nodes lie a tenth of their chordwise spread from that line (its inertia 1 % of the other two), so it would
+        take large opposing forces on nodes centimetres apart; the wing's bending about that axis is carried by the
+        sections' forces. Used to carry a step's unbalanced residual (``structure.carry_residual``)."""
+        sec = self.wing.mesh.sections
+        m, x = self.m_node[sec], self.state.x[sec]  # (n_sec, k), (n_sec, k, 3)
+        Ms = m.sum(axis=1)
+        r = x - (np.einsum("sk,ski->si", m, x) / Ms[:, None])[:, None, :]
+        r6 = rho.reshape(-1, 6)
+        F = r6[sec, :3].sum(axis=1)
+        Mo = cross(r, r6[sec, :3]).sum(axis=1) + r6[sec, 3:].sum(axis=1)
+        B = np.einsum("sk,ski,skj->sij", m, r, r)
+        J = np.trace(B, axis1=1, axis2=2)[:, None, None] * np.eye(3) - B  # the section's inertia tensor
+        lam, V = np.linalg.eigh(J)  # (ascending: V[:, :, 0] the chord line)
+        al = np.einsum("sij,sj,sj->si", V[:, :, 1:], 1.0 / lam[:, 1:], np.einsum("sji,sj->si", V[:, :, 1:], Mo))
+        out = np.zeros_like(r6)
+        out[sec.ravel(), :3] = (m[:, :, None] * (F[:, None, :] / Ms[:, None, None]
+                                                  + cross(al[:, None, :], r))).reshape(-1, 3)
+        return out.reshape(-1)
 
     def kinetic_energy(self) -> float:
         """``1/2 sum v . M v + 1/2 sum J |w|^2`` [J] with the current mass blocks (structural and added mass) and the
