@@ -192,6 +192,7 @@ class _StepLoad:
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
         self.K0 = None  # the structure's tangent data K_T(at) at the Newton start (beta K_T on the translations)
         self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
+        self._Kb_state = None  # the iterate of Kb_at
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
         if self.beta_K > 0.0:
             self.v_rigid = V[None, :] + dyn.state.x @ skew(w).T  # V + w x x
@@ -233,6 +234,7 @@ class _StepLoad:
             self.K0 = kd  # (on the nodal translations alone in the force: WingDynamics.translation_product)
             if dyn.tip_rods is not None:
                 self.Kb_at = dyn.tip_tangents(st)
+                self._Kb_state = st
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
@@ -272,7 +274,10 @@ class _StepLoad:
         """The tip rods' element tangents at ``st``, where the solver factorises the step's tangent, and at this
         step's Newton start (in the Rayleigh damping ``K0``): what :meth:`tangent_change` compares with."""
         dyn = self.dyn
-        return None if dyn.tip_rods is None else (dyn.tip_tangents(st), self.Kb_at)
+        if dyn.tip_rods is None:
+            return None
+        # (a factorisation at the Newton start: the tangents force() evaluated there)
+        return (self.Kb_at if st is self._Kb_state else dyn.tip_tangents(st)), self.Kb_at
 
     def tangent_change(self, st: NodalState, snapshot) -> tuple | None:
         """The change of the step's tangent on the tip rods' DOF since the factorisation of ``snapshot``
