@@ -79,6 +79,11 @@ class StructureConfig:
     # translations, beta = 2 zeta / omega_ref: 2 % of critical at 10 Hz, the level of the paper's relative damping
     # coefficients of the wing (Table 1: 0.015-0.02); 0 = none [s]
     rayleigh_beta_s: float = 6.4e-4
+    # the tangent K_T of that damping is refreshed when it is this old (time from the step end where it was
+    # assembled to the current step's end) and held, turned with the step's frame, in between: the damping matrix
+    # of the wing's shape at most this long ago. 0 = every step (stops 31-36). Assembling the full tangent at each
+    # step's Newton start cost 0.4 ms of a 5.5 ms step (docs/flight_model.md, section 25) [s]
+    rayleigh_tangent_period_s: float = 0.02
     # the canopy's membrane forces in a time step of the wing with inertia: "energy_consistent" = the discrete
     # gradient of the stored energy between the step's ends (Gonzalez 2000), whose work is the energy change at the
     # wrinkling law's kinks; "averaged" = generalized-alpha's averaged end forces (stops before 27), which pump energy
@@ -324,7 +329,7 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "structure.added_mass_factor", "structure.rayleigh_beta_s", "sim.initial_speed_per_wind", "sim.initial_speed_mps",
+    "structure.added_mass_factor", "structure.rayleigh_beta_s", "structure.rayleigh_tangent_period_s", "sim.initial_speed_per_wind", "sim.initial_speed_mps",
     "structure.rotary_inertia_factor",
     "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max",
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",

@@ -507,3 +507,33 @@ def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out
     out[0] = f0 + 0.5 * d0
     out[1] = f1 + 0.5 * d1
     out[2] = f2 + 0.5 * d2
+
+
+@njit(**_JIT)
+def wing_bridle_lines(x_b, v_b, r_k, v_k, v_wind, rest, k_c, c_c, drag_coef, eps, e, l, T, dT, drag):
+    """The bridle lines at the wing's ends A-D (:meth:`kite_env.dynamics.wing_dynamics._StepLoad._lines` and the
+    drag that ``force`` adds, compiled: a Newton iterate's NumPy calls on four lines cost more than the arithmetic).
+    Into ``e`` (4, 3) the unit vectors KCU -> A-D, ``l`` (4,) [m] the lengths, ``T``, ``dT`` (4,) the smoothed
+    pull-only tension of Eq. (10) and its derivative (:func:`kite_env.dynamics.wing_dynamics.line_tension`, width
+    ``eps`` [N]), ``drag`` (4, 3) [N] the wing end's half of Eq. (11)'s drag
+    (:func:`kite_env.dynamics.particles.line_drag`, ``drag_coef = -1/2 rho C_D d``) with the lines' mean velocity
+    and the wind ``v_wind`` (3,). ``x_b``, ``v_b`` (4, 3): A-D; ``r_k``, ``v_k`` (3,): the KCU; frame of the step."""
+    eps2 = eps * eps
+    for i in range(4):
+        a0, a1, a2 = x_b[i, 0] - r_k[0], x_b[i, 1] - r_k[1], x_b[i, 2] - r_k[2]
+        li = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        e0, e1, e2 = a0 / li, a1 / li, a2 / li
+        ld = e0 * (v_b[i, 0] - v_k[0]) + e1 * (v_b[i, 1] - v_k[1]) + e2 * (v_b[i, 2] - v_k[2])
+        s = k_c * (li - rest[i]) + c_c * ld
+        root = math.sqrt(s * s + eps2)
+        T[i] = 0.5 * (s + root) if s >= 0.0 else 0.5 * eps2 / (root - s)
+        dT[i] = 0.5 * (1.0 + s / root)
+        e[i, 0], e[i, 1], e[i, 2] = e0, e1, e2
+        l[i] = li
+        va0 = 0.5 * (v_b[i, 0] + v_k[0]) - v_wind[0]
+        va1 = 0.5 * (v_b[i, 1] + v_k[1]) - v_wind[1]
+        va2 = 0.5 * (v_b[i, 2] + v_k[2]) - v_wind[2]
+        p = va0 * e0 + va1 * e1 + va2 * e2
+        n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
+        g = 0.5 * (drag_coef * (li * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)))
+        drag[i, 0], drag[i, 1], drag[i, 2] = g * n0, g * n1, g * n2

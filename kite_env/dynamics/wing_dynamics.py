@@ -28,7 +28,8 @@ the wing has mass and moves:
   own nodes.
 * **Structural damping**: stiffness-proportional (Rayleigh) ``beta K_T(x_n)`` on the nodal translations, acting on
   the motion relative to the rigid-body motion, ``beta = structure.rayleigh_beta_s`` (2 % of critical at 10 Hz by
-  default, the level of the relative damping coefficients the paper gives its wing, Table 1).
+  default, the level of the relative damping coefficients the paper gives its wing, Table 1). ``K_T`` is the tangent
+  of the wing's shape at most ``structure.rayleigh_tangent_period_s`` (20 ms) before, turned with the frame.
 * **Bridle lines** of Eq. (10) (spring-dampers, pulling only) from A-D to the KCU, whose position at the end of the
   step is given (the staggered partition: the KCU's explicit step first, then the wing's implicit step); line drag
   (Eq. 11), half to the wing end. Gravity on the nodal masses.
@@ -48,7 +49,6 @@ the wing has mass and moves:
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +57,7 @@ import scipy.sparse as sp
 from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry, skew
+from kite_env.dynamics.kernels import wing_bridle_lines
 from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.frames import cross
@@ -187,13 +188,31 @@ class _StepLoad:
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
                                  self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
         # structural (Rayleigh) damping beta K_T(x) on the translations, of the motion relative to the rigid one; its
-        # tangent is the structure's at the first iterate of the step, ``at`` (the Newton start), assembled in the
-        # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice
+        # tangent is the structure's at the first iterate of a step, ``at`` (the Newton start), assembled in the
+        # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice;
+        # then held over the next steps of structure.rayleigh_tangent_period_s
         self.beta_K = float(wing.cfg.structure.rayleigh_beta_s)
-        self.K0 = None  # the structure's tangent data K_T(at) at the Newton start (beta K_T on the translations)
-        self.Kb_at = None  # the tip rods' element tangents at the Newton start (in K0)
-        self._Kb_state = None  # the iterate of Kb_at
+        self.K0 = None  # the structure's tangent data K_T at the Newton start (beta K_T on the translations)
+        self.Kb_at = None  # the tip rods' element tangents where K0 was assembled (in K0)
+        self._Kb_state = None  # the iterate of Kb_at (this step's Newton start when assembled here)
         self._pre = None  # (iterate, f_int, tangent data) assembled by force() for the solver
+        self.K0_turn = None  # the frame's turn since K0 was assembled (3, 3), None: assembled in this frame
+        self.K0_fresh = False  # assembled in this step
+        held = dyn.rayleigh_held
+        if self.beta_K > 0.0 and held is not None and held[2] + dt < dyn.rayleigh_period * (1.0 - 1e-9):
+            # the tangent of a step that ended less than structure.rayleigh_tangent_period_s before this one will:
+            # held, its assembly at this Newton start is skipped. It is the tangent of the wing's shape then, turned
+            # with the frame since (Q K Q^T on each node pair's block): in the frame of its assembly it would damp
+            # the deformation of a shape turned by the frame's rotation (about 1 deg in 20 ms of a turn). The
+            # Newton tangent keeps it unturned (a factorisation's approximation), except on the stiff tip rods,
+            # whose correction of a kept factorisation (tangent_change) takes their turned share: without it a step
+            # made 0.08 more Newton iterations (docs/flight_model.md, section 25)
+            self.K0, self.Kb_at, _, Q = held
+            self.K0_turn = None if np.array_equal(Q, np.eye(3)) else Q
+        self.Kb_turned = self.Kb_at  # the tip rods' share as the force takes it (turned with K0_turn)
+        if self.K0_turn is not None and self.Kb_at is not None:
+            Q12 = np.kron(np.eye(4), self.K0_turn)  # (each of the rods' two nodes: a translation and a rotation)
+            self.Kb_turned = Q12 @ self.Kb_at @ Q12.T
         if self.beta_K > 0.0:
             self.v_rigid = V[None, :] + dyn.state.x @ skew(w).T  # V + w x x
 
@@ -215,12 +234,23 @@ class _StepLoad:
         return np.einsum("ij,ijk->ik", self.W, v[self.dyn.wing.mesh.sections]) - self.u_ref
 
     def _lines(self, x, v):
-        d = x[self.dyn.bridle] - self.r_kcu
+        """The bridle lines (Eq. 10) at the iterate: ``e`` (4, 3) the unit vectors KCU -> A-D, ``l`` (4,) [m],
+        tension ``T`` (4,) [N] and ``dT = dT/ds`` (:func:`line_tension`), and the wing ends' half of their drag
+        (Eq. 11) (4, 3) [N]."""
+        dyn = self.dyn
+        b = dyn.bridle
+        if dyn.compiled:
+            e, l, T, dT, drag = np.empty((4, 3)), np.empty(4), np.empty(4), np.empty(4), np.empty((4, 3))
+            wing_bridle_lines(x[b], v[b], self.r_kcu, self.v_kcu, self.v_wind_mid, self.rest, dyn.k_c, dyn.c_c,
+                              dyn.line_drag, LINE_SMOOTHING_N, e, l, T, dT, drag)
+            return e, l, T, dT, drag
+        d = x[b] - self.r_kcu
         l = np.linalg.norm(d, axis=1)
         e = d / l[:, None]
-        ldot = np.einsum("ij,ij->i", e, v[self.dyn.bridle] - self.v_kcu)
-        T, dT = line_tension(self.dyn.k_c * (l - self.rest) + self.dyn.c_c * ldot)
-        return e, l, T, dT
+        ldot = np.einsum("ij,ij->i", e, v[b] - self.v_kcu)
+        T, dT = line_tension(dyn.k_c * (l - self.rest) + dyn.c_c * ldot)
+        drag = 0.5 * line_drag(dyn.line_drag, 0.5 * (v[b] + self.v_kcu) - self.v_wind_mid, e, l)
+        return e, l, T, dT, drag
 
     def force(self, st: NodalState) -> np.ndarray:
         dyn, wing = self.dyn, self.dyn.wing
@@ -232,24 +262,26 @@ class _StepLoad:
             f_int, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
             self._pre = (st, f_int, kd)
             self.K0 = kd  # (on the nodal translations alone in the force: WingDynamics.translation_product)
+            self.K0_fresh = True
             if dyn.tip_rods is not None:
-                self.Kb_at = dyn.tip_tangents(st)
+                self.Kb_at = self.Kb_turned = dyn.tip_tangents(st)
                 self._Kb_state = st
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
                                    wing.cfg.aero.rho_kg_m3, **wing._aero_options())
-        f_damp = -self.W[:, :, None] * np.einsum("ikl,il->ik", self.C, self.section_deviation(v))[:, None, :]
-        self.loads = dataclasses.replace(self.loads, nodal_forces=self.loads.nodal_forces + f_damp)
+        # (the loads' own new array: the damping forces added in place)
+        self.loads.nodal_forces[...] -= self.W[:, :, None] * np.einsum("ikl,il->ik", self.C,
+                                                                        self.section_deviation(v))[:, None, :]
         f = wing._load_vector(self.loads)
         f6 = f.reshape(-1, 6)
         if self.K0 is not None:
-            f6[:, :3] -= dyn.translation_product(self.K0, self.beta_K, v - self.v_rigid)
+            f6[:, :3] -= self.rayleigh_force(v - self.v_rigid)
         # bridle lines, Eq. (10), and their drag, Eq. (11) (half to the wing end)
-        e, l, T, _ = self._lines(st.x, v)
+        e, l, T, _, drag = self._lines(st.x, v)
         self.line = (T, l, e)
         f6[dyn.bridle, :3] -= T[:, None] * e
-        f6[dyn.bridle, :3] += 0.5 * line_drag(dyn.line_drag, 0.5 * (v[dyn.bridle] + self.v_kcu) - self.v_wind_mid, e, l)
+        f6[dyn.bridle, :3] += drag
         f6[:, :3] += dyn.m_node[:, None] * self.g_K[None, :]
         self.f_phys = f.copy()
         p = dyn.alpha
@@ -269,6 +301,15 @@ class _StepLoad:
                     - dyn.membrane_force(st.x, x0=dyn.state.x) / (1.0 - p.alpha_f)
         self.f_eff = f
         return f
+
+    def rayleigh_force(self, u: np.ndarray) -> np.ndarray:
+        """The structural damping's force ``beta K_T u`` (n_nodes, 3) [N] on the nodal translations for the
+        velocities ``u`` (n_nodes, 3) [m/s] relative to the rigid motion, with the step's tangent ``K0``, turned by
+        ``K0_turn`` when held from an earlier frame (``Q K Q^T u``)."""
+        Q = self.K0_turn
+        if Q is None:
+            return self.dyn.translation_product(self.K0, self.beta_K, u)
+        return self.dyn.translation_product(self.K0, self.beta_K, u @ Q) @ Q.T
 
     def tangent_snapshot(self, st: NodalState):
         """The tip rods' element tangents at ``st``, where the solver factorises the step's tangent, and at this
@@ -295,7 +336,7 @@ class _StepLoad:
         Kt0, Kt_at0 = snapshot
         D = dyn.tip_tangents(st) - Kt0
         if self.K0 is not None and Kt_at0 is not None and self.Kb_at is not None:
-            D += (self.c_v * self.beta_K) * dyn.tip_tt * (self.Kb_at - Kt_at0)
+            D += (self.c_v * self.beta_K) * dyn.tip_tt * (self.Kb_turned - Kt_at0)
         k = dyn.tip_dofs.size
         return dyn.tip_dofs, np.bincount(dyn.tip_block_index, weights=D.ravel(), minlength=k * k).reshape(k, k)
 
@@ -342,7 +383,7 @@ class _StepLoad:
         np.add.at(M, dyn.node_blocks[used].ravel(), dyn.M_blocks[used].ravel())
         if dyn.has_rotary_inertia:  # d th / d spin = I for the small rotations of a step
             M[dyn.rot_diag] += np.repeat(dyn.J_node[used], 3)
-        e, l, T, dT = self._lines(st.x, v)
+        e, l, T, dT, _ = self._lines(st.x, v)
         ee = e[:, :, None] * e[:, None, :]
         blk = dyn.node_blocks[dyn.bridle].ravel()
         np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
@@ -427,6 +468,10 @@ class WingDynamics:
         # (rho, dt) of the last step: the residual its Newton left (free DOF; structure.carry_residual) and its step
         self.carry: tuple | None = None
         self.carry_residual = cfg.structure.carry_residual
+        # the Rayleigh damping's tangent held over steps: (tangent data, tip rods' tangents, the time from the end of
+        # the step that assembled it to the current state [s], the frame's turn since then (3, 3)) or None
+        self.rayleigh_held: tuple | None = None
+        self.rayleigh_period = float(cfg.structure.rayleigh_tangent_period_s)
         self.w = self.aw = None  # nodal angular velocities and accelerations (n_nodes, 3), spatial, frame of the step
         self.M_blocks = None
         self._prev: tuple | None = None  # (state, dt) before the last step, in the current frame (predictor)
@@ -546,6 +591,7 @@ class WingDynamics:
         self.a = np.zeros_like(self.v)
         self.r_prev = np.zeros(self.wing.n_dof)
         self.carry = None
+        self.rayleigh_held = None
         self.w = np.zeros_like(self.v)  # (the start's load: no rotation over its "step")
         self.aw = np.zeros_like(self.v)
         self.update_mass()
@@ -580,6 +626,9 @@ class WingDynamics:
         self.r_prev = r6.reshape(-1)
         if self.carry is not None:
             self.carry = ((self.carry[0].reshape(-1, 2, 3) @ Q.T).reshape(-1), self.carry[1])
+        if self.rayleigh_held is not None:
+            kd, kb, age, Q0 = self.rayleigh_held
+            self.rayleigh_held = (kd, kb, age, Q @ Q0)
         self.wing.state = self.state
         if self._prev is not None:
             prev, dt_prev = self._prev
@@ -623,6 +672,11 @@ class WingDynamics:
                         "factorizations": res.factorizations, "accepted": res.accepted, "method": "dynamic"})
         self._prev = (self.state, dt)
         self.state, self.v, self.a, self.r_prev = st, v, a, r
+        if load.K0_fresh:
+            self.rayleigh_held = (load.K0, load.Kb_at, 0.0, np.eye(3))
+        elif self.rayleigh_held is not None:
+            kd, kb, age, Q0 = self.rayleigh_held
+            self.rayleigh_held = (kd, kb, age + dt, Q0)
         if self.carry_residual != "none":
             # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance;
             # on the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the

@@ -263,3 +263,34 @@ def test_kcu_line_force_matches_the_numpy_lines(seed):
     assert T[1] < LINE_SMOOTHING_N and T[0] > 1e3
     ref = T @ e + 0.5 * line_drag(coef, 0.5 * (v_b + v_k) - 0.5 * (wind[:4] + wind[4]), e, l).sum(axis=0)
     assert np.allclose(out, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_wing_bridle_lines_match_the_numpy_lines(seed):
+    """wing_bridle_lines (the wing with inertia's lines at every Newton iterate) = the NumPy path of
+    ``_StepLoad._lines``: unit vectors, lengths, the smoothed pull-only tension of Eq. (10) and its derivative, and
+    the wing end's half of Eq. (11)'s drag with the lines' mean velocity, to round-off; one line slack and one
+    stretched, so that both branches of the tension law are taken."""
+    from kite_env.dynamics.kernels import wing_bridle_lines
+    from kite_env.dynamics.particles import line_drag
+    from kite_env.dynamics.wing_dynamics import LINE_SMOOTHING_N, line_tension
+
+    rng = np.random.default_rng(seed)
+    r_k = rng.normal(size=3)
+    x_b = r_k + np.array([0.0, 0.0, 11.0]) + Q0 + 0.05 * rng.normal(size=(4, 3))
+    v_k = rng.normal(scale=2.0, size=3)
+    v_b = v_k + rng.normal(scale=2.0, size=(4, 3))
+    wind = np.array([-25.0, 0.0, 3.0]) + rng.normal(size=3)
+    l0 = np.linalg.norm(x_b - r_k, axis=1)
+    rest = l0 - np.array([0.2, -1.0, 0.1, 0.0])  # line B 1 m too long: slack
+    k_c, c_c, coef = 6e4, 1e2, -0.5 * 1.225 * 1.1 * 2.5e-3
+    e, l, T, dT, drag = (np.full(s, np.nan) for s in ((4, 3), 4, 4, 4, (4, 3)))
+    wing_bridle_lines(x_b, v_b, r_k, v_k, wind, rest, k_c, c_c, coef, LINE_SMOOTHING_N, e, l, T, dT, drag)
+    d = x_b - r_k
+    l_ref = np.linalg.norm(d, axis=1)
+    e_ref = d / l_ref[:, None]
+    T_ref, dT_ref = line_tension(k_c * (l_ref - rest) + c_c * np.einsum("ij,ij->i", e_ref, v_b - v_k))
+    assert T_ref[1] < LINE_SMOOTHING_N and T_ref[0] > 1e3
+    drag_ref = 0.5 * line_drag(coef, 0.5 * (v_b + v_k) - wind, e_ref, l_ref)
+    for got, ref in ((e, e_ref), (l, l_ref), (T, T_ref), (dT, dT_ref), (drag, drag_ref)):
+        assert np.allclose(got, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
