@@ -204,9 +204,10 @@ class _StepLoad:
             # held, its assembly at this Newton start is skipped. It is the tangent of the wing's shape then, turned
             # with the frame since (Q K Q^T on each node pair's block): in the frame of its assembly it would damp
             # the deformation of a shape turned by the frame's rotation (about 1 deg in 20 ms of a turn). The
-            # Newton tangent keeps it unturned (a factorisation's approximation), except on the stiff tip rods,
-            # whose correction of a kept factorisation (tangent_change) takes their turned share: without it a step
-            # made 0.08 more Newton iterations (docs/flight_model.md, section 25)
+            # Newton tangent takes it turned as well (operators; the tip rods' correction of a kept factorisation,
+            # tangent_change, their turned share): unturned, the load's tangent was 11 % off along the Newton
+            # direction in the 10 m/s collapse (the frame turning at 15 rad/s) and a 5 ms step of the baseline made
+            # 0.08 more Newton iterations (docs/flight_model.md, section 25)
             self.K0, self.Kb_at, _, Q = held
             self.K0_turn = None if np.array_equal(Q, np.eye(3)) else Q
         self.Kb_turned = self.Kb_at  # the tip rods' share as the force takes it (turned with K0_turn)
@@ -318,7 +319,7 @@ class _StepLoad:
         if dyn.tip_rods is None:
             return None
         # (a factorisation at the Newton start: the tangents force() evaluated there)
-        return (self.Kb_at if st is self._Kb_state else dyn.tip_tangents(st)), self.Kb_at
+        return (self.Kb_at if st is self._Kb_state else dyn.tip_tangents(st)), self.Kb_turned
 
     def tangent_change(self, st: NodalState, snapshot) -> tuple | None:
         """The change of the step's tangent on the tip rods' DOF since the factorisation of ``snapshot``
@@ -389,7 +390,8 @@ class _StepLoad:
         np.add.at(K, blk, ((dT * dyn.k_c)[:, None, None] * ee + (T / l)[:, None, None] * (np.eye(3) - ee)).ravel())
         np.add.at(C, blk, ((dT * dyn.c_c)[:, None, None] * ee).ravel())
         if self.K0 is not None:
-            C += self.beta_K * self.K0 * dyn.tt_mask
+            C += self.beta_K * (self.K0 if self.K0_turn is None else dyn.turned_translations(self.K0, self.K0_turn)) \
+                * dyn.tt_mask
         return K, C, M
 
 
@@ -445,6 +447,13 @@ class WingDynamics:
         self._tt_indices = (3 * (asm.indices[tt] // 6) + asm.indices[tt] % 6).astype(np.int32)
         col_t = 3 * (dof_r[tt] // 6) + dof_r[tt] % 6
         self._tt_indptr = np.searchsorted(col_t, np.arange(3 * n + 1)).astype(np.int32)
+        # the translation-translation entries as whole 3x3 node-pair blocks (n_blocks, 3, 3) (turned_translations)
+        row_n, col_n = asm.indices[tt] // 6, dof_r[tt] // 6
+        pair, block = np.unique(row_n.astype(np.int64) * n + col_n, return_inverse=True)
+        self._tt_blocks = np.full((pair.size, 3, 3), -1, dtype=np.int64)
+        self._tt_blocks[block, asm.indices[tt] % 6, dof_r[tt] % 6] = tt
+        if np.any(self._tt_blocks < 0):
+            raise RuntimeError("the wing's tangent pattern has a partial translation block")
         # the tip rods, a set of their own with the wing's properties: their tangents correct a kept factorisation
         # (_StepLoad.tangent_change)
         tip = np.flatnonzero(np.asarray(mesh.beam_kind) == BEAM_TIP)
@@ -535,6 +544,13 @@ class WingDynamics:
         translations alone (``3 n_nodes`` DOF, node-major)."""
         n = 3 * self.wing.mesh.n_nodes
         return sp.csc_matrix((data[self._tt_entries], self._tt_indices, self._tt_indptr), shape=(n, n))
+
+    def turned_translations(self, data: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """Pattern data (length ``nnz``) with every node pair's translation block ``B`` replaced by ``Q B Q^T``
+        (the tangent of the shape turned by ``Q``; the other entries as they are)."""
+        out = data.copy()
+        out[self._tt_blocks] = Q @ data[self._tt_blocks] @ Q.T
+        return out
 
     def translation_product(self, data: np.ndarray, scale: float, u: np.ndarray) -> np.ndarray:
         """``(scale T) u`` (n_nodes, 3) with ``T = translation_matrix(data)`` and ``u`` (n_nodes, 3): the same
