@@ -584,16 +584,18 @@ def test_the_rayleigh_tangent_is_held_over_its_period_and_turned_with_the_frame(
     assert np.linalg.norm(fd - T @ du) <= 2e-3 * np.linalg.norm(fd)
 
 
-def test_the_held_rayleigh_tangent_keeps_the_flight_and_saves_its_assemblies():
-    """The baseline's first 3 s with the structural damping's tangent held over 20 ms (the default) and assembled
-    at every step (``rayleigh_tangent_period_s = 0``, stops 31-36): the KCU within a centimetre (10 s: 0.67 cm),
-    and no more Newton iterations (10 s: 1.56 against 1.59 per step)."""
+def test_the_held_rayleigh_tangent_keeps_the_flight_and_its_newton_iterations():
+    """The baseline's first 10 s with the structural damping's tangent held over 20 ms (the default) and assembled
+    at every step (``rayleigh_tangent_period_s = 0``, stops 31-36): the KCU within a centimetre (0.66 cm), and no
+    more Newton iterations per step (1.58 against 1.59). (Over the first seconds the two counts differ by their
+    noise: 1.89 / 1.18 / 1.14 against 1.81 / 1.02 / 1.26 in the first three; the steps that assemble the tangent
+    again make more in the start's first second, 2.14 against 1.8.)"""
     base = Config()
     runs = {}
     for period in (0.0, 0.02):
         cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True,
                                                                       rayleigh_tangent_period_s=period))
-        sim, recs = _baseline_flight(cfg, 3.0)
+        sim, recs = _baseline_flight(cfg, 10.0)
         runs[period] = (np.array([r.state.r[4] for r in recs]), np.mean([r.wing.newton_iters for r in recs[20:]]))
     gap = np.max(np.linalg.norm(runs[0.02][0] - runs[0.0][0], axis=1))
     assert 0.0 < gap < 0.01, gap
@@ -605,14 +607,18 @@ def test_the_tip_rod_correction_saves_newton_iterations_and_leaves_the_flight(mo
     (``_StepLoad.tangent_change``): fewer Newton iterations per step; with Newton converged tightly (1e-6 of the
     load) the same flight. (At the default tolerance, 1e-3, the two differ within it: 1.4 cm after 1.5 s.) Over this
     second 1.52 against 1.92 iterations per step (stop 35, the residual dropped); carrying all of each step's residual
-    into the next (``structure.carry_residual=full``) 1.78 against 2.02."""
+    into the next (``structure.carry_residual=full``) 1.78 against 2.02. The Rayleigh damping's tangent is assembled
+    at every step here (``rayleigh_tangent_period_s = 0``, stops 31-36), so that the two runs differ by the
+    correction alone; with the default, held over 20 ms, 1.68 against 1.95 over this second (stop 37: in the start's
+    first second the steps that assemble the held tangent again make more iterations, with or without it)."""
     base = Config()
     runs = {}
     for corrected in (True, False):
         if not corrected:
             monkeypatch.setattr(_StepLoad, "tangent_change", lambda self, st, snapshot: None)
         for tol in (1e-3, 1e-6):
-            cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True),
+            cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True,
+                                                                          rayleigh_tangent_period_s=0.0),
                                       fsi=dataclasses.replace(base.fsi, tol_force_rel=tol, tol_disp_m=0.1 * tol))
             sim, recs = _baseline_flight(cfg, 1.0 if tol > 1e-4 else 0.5)
             runs[corrected, tol] = (np.mean([r.wing.newton_iters for r in recs[20:]]), recs[-1].state.r[4],
