@@ -474,6 +474,31 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
 
 
 @njit(**_JIT)
+def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
+    """Line ``i`` from the KCU at ``r_k`` (velocity ``v_k``) to the wing end ``x_b[i]`` (velocity ``v_b[i]``):
+    unit vector ``e0, e1, e2`` (KCU -> wing), length ``l``, the spring-damper force ``s`` of Eq. (10), ``root =
+    sqrt(s^2 + eps2)`` and the smoothed pull-only tension ``T`` (:func:`kite_env.dynamics.wing_dynamics.line_tension`)."""
+    a0, a1, a2 = x_b[i, 0] - r_k[0], x_b[i, 1] - r_k[1], x_b[i, 2] - r_k[2]
+    l = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    e0, e1, e2 = a0 / l, a1 / l, a2 / l
+    ld = e0 * (v_b[i, 0] - v_k[0]) + e1 * (v_b[i, 1] - v_k[1]) + e2 * (v_b[i, 2] - v_k[2])
+    s = k_c * (l - rest_i) + c_c * ld
+    root = math.sqrt(s * s + eps2)
+    T = 0.5 * (s + root) if s >= 0.0 else 0.5 * eps2 / (root - s)
+    return e0, e1, e2, l, s, root, T
+
+
+@njit(**_JIT)
+def _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef):
+    """Eq. (11)'s drag of a straight line of length ``l`` along ``e`` in the apparent wind ``va`` (the whole of it:
+    :func:`kite_env.dynamics.particles.line_drag`, ``drag_coef = -1/2 rho C_D d``)."""
+    p = va0 * e0 + va1 * e1 + va2 * e2
+    n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
+    g = drag_coef * (l * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2))
+    return g * n0, g * n1, g * n2
+
+
+@njit(**_JIT)
 def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out):
     """The bridle lines' pull on the KCU and its half of their drag (3,) [N] into ``out``: what
     :meth:`kite_env.dynamics.dynamic_simulator.DynamicFlightSimulator._kcu_acceleration` adds with NumPy, the
@@ -485,25 +510,17 @@ def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out
     f0, f1, f2 = 0.0, 0.0, 0.0
     d0, d1, d2 = 0.0, 0.0, 0.0
     for i in range(4):
-        a0, a1, a2 = r_b[i, 0] - r_k[0], r_b[i, 1] - r_k[1], r_b[i, 2] - r_k[2]
-        l = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        e0, e1, e2 = a0 / l, a1 / l, a2 / l
-        ld = e0 * (v_b[i, 0] - v_k[0]) + e1 * (v_b[i, 1] - v_k[1]) + e2 * (v_b[i, 2] - v_k[2])
-        s = k_c * (l - rest[i]) + c_c * ld
-        root = math.sqrt(s * s + eps2)
-        T = 0.5 * (s + root) if s >= 0.0 else 0.5 * eps2 / (root - s)
+        e0, e1, e2, l, _, _, T = _bridle_line(r_b, v_b, i, r_k, v_k, rest[i], k_c, c_c, eps2)
         f0 += T * e0
         f1 += T * e1
         f2 += T * e2
         va0 = 0.5 * (v_b[i, 0] + v_k[0]) - 0.5 * (wind[i, 0] + wind[4, 0])
         va1 = 0.5 * (v_b[i, 1] + v_k[1]) - 0.5 * (wind[i, 1] + wind[4, 1])
         va2 = 0.5 * (v_b[i, 2] + v_k[2]) - 0.5 * (wind[i, 2] + wind[4, 2])
-        p = va0 * e0 + va1 * e1 + va2 * e2
-        n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
-        g = drag_coef * (l * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2))
-        d0 += g * n0
-        d1 += g * n1
-        d2 += g * n2
+        g0, g1, g2 = _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef)
+        d0 += g0
+        d1 += g1
+        d2 += g2
     out[0] = f0 + 0.5 * d0
     out[1] = f1 + 0.5 * d1
     out[2] = f2 + 0.5 * d2
@@ -520,20 +537,11 @@ def wing_bridle_lines(x_b, v_b, r_k, v_k, v_wind, rest, k_c, c_c, drag_coef, eps
     and the wind ``v_wind`` (3,). ``x_b``, ``v_b`` (4, 3): A-D; ``r_k``, ``v_k`` (3,): the KCU; frame of the step."""
     eps2 = eps * eps
     for i in range(4):
-        a0, a1, a2 = x_b[i, 0] - r_k[0], x_b[i, 1] - r_k[1], x_b[i, 2] - r_k[2]
-        li = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        e0, e1, e2 = a0 / li, a1 / li, a2 / li
-        ld = e0 * (v_b[i, 0] - v_k[0]) + e1 * (v_b[i, 1] - v_k[1]) + e2 * (v_b[i, 2] - v_k[2])
-        s = k_c * (li - rest[i]) + c_c * ld
-        root = math.sqrt(s * s + eps2)
-        T[i] = 0.5 * (s + root) if s >= 0.0 else 0.5 * eps2 / (root - s)
+        e0, e1, e2, li, s, root, Ti = _bridle_line(x_b, v_b, i, r_k, v_k, rest[i], k_c, c_c, eps2)
+        T[i] = Ti
         dT[i] = 0.5 * (1.0 + s / root)
         e[i, 0], e[i, 1], e[i, 2] = e0, e1, e2
         l[i] = li
-        va0 = 0.5 * (v_b[i, 0] + v_k[0]) - v_wind[0]
-        va1 = 0.5 * (v_b[i, 1] + v_k[1]) - v_wind[1]
-        va2 = 0.5 * (v_b[i, 2] + v_k[2]) - v_wind[2]
-        p = va0 * e0 + va1 * e1 + va2 * e2
-        n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
-        g = 0.5 * (drag_coef * (li * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)))
-        drag[i, 0], drag[i, 1], drag[i, 2] = g * n0, g * n1, g * n2
+        g0, g1, g2 = _line_drag(0.5 * (v_b[i, 0] + v_k[0]) - v_wind[0], 0.5 * (v_b[i, 1] + v_k[1]) - v_wind[1],
+                                0.5 * (v_b[i, 2] + v_k[2]) - v_wind[2], e0, e1, e2, li, drag_coef)
+        drag[i, 0], drag[i, 1], drag[i, 2] = 0.5 * g0, 0.5 * g1, 0.5 * g2
