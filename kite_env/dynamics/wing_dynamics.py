@@ -313,8 +313,9 @@ class _StepLoad:
         return self.dyn.translation_product(self.K0, self.beta_K, u @ Q) @ Q.T
 
     def tangent_snapshot(self, st: NodalState):
-        """The tip rods' element tangents at ``st``, where the solver factorises the step's tangent, and at this
-        step's Newton start (in the Rayleigh damping ``K0``): what :meth:`tangent_change` compares with."""
+        """The tip rods' element tangents at ``st``, where the solver factorises the step's tangent, and their share
+        of the step's Rayleigh damping tangent ``K0`` as the factorisation holds it (turned with ``K0_turn``): what
+        :meth:`tangent_change` compares with."""
         dyn = self.dyn
         if dyn.tip_rods is None:
             return None
@@ -324,7 +325,7 @@ class _StepLoad:
     def tangent_change(self, st: NodalState, snapshot) -> tuple | None:
         """The change of the step's tangent on the tip rods' DOF since the factorisation of ``snapshot``
         (:meth:`tangent_snapshot`): their stiffness at the iterate, and their share of the Rayleigh damping ``c_v
-        beta K_T`` at this step's Newton start. Returns ``(dofs, dT)`` for :meth:`StaticSolver._block_correction`.
+        beta K_T`` of this step (``K0``, turned). Returns ``(dofs, dT)`` for :meth:`StaticSolver._block_correction`.
 
         The tip rods (glass fibre, the wing's stiffest members: ``EA / L`` about 1e7 N/m) turn with the tips'
         twist from step to step. A factorisation kept over a few steps (modified Newton) has their axial stiffness
