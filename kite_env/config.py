@@ -39,6 +39,10 @@ class StructureConfig:
     canopy_nu: float = 0.3  # Poisson ratio [-]
     canopy_thickness_m: float = 0.08e-3  # [m]
     wrinkling: bool = True  # tension-field membrane (no compressive membrane stress)
+    # in-plane shear modulus of the canopy fabric as a fraction of the isotropic E / (2 (1 + nu)): 1 = the paper's
+    # isotropic law; below 1 a balanced woven fabric with its threads along the chord (x of frame K) and span
+    # (kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/flight_model.md, section 26) [-]
+    canopy_shear_ratio: float = 1.0
     # inflated tubes (LE, struts): Breukels' correlations (physics_facts.md 2); 0.3 bar = V3 flight pressure (4.3)
     tube_pressure_Pa: float = 0.3e5  # gauge pressure [Pa]
     # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public (physics_facts 4.5):
@@ -469,6 +473,9 @@ def _validate(cfg: Config) -> None:
                           "structure.dynamic=false for the paper's point masses alone)")
     if not 0.0 <= cfg.structure.rho_inf <= 1.0:
         raise ConfigError(f"config key 'structure.rho_inf' must lie in [0, 1], got {cfg.structure.rho_inf}")
+    if not 0.0 < cfg.structure.canopy_shear_ratio <= 1.0:
+        raise ConfigError("config key 'structure.canopy_shear_ratio' must lie in (0, 1] (1: the isotropic canopy), "
+                          f"got {cfg.structure.canopy_shear_ratio}")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:
         raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
     if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 7:

@@ -500,10 +500,10 @@ class WingDynamics:
         (:func:`kite_env.structure.shell_membrane.membrane_discrete_gradient`)."""
         sh = self.wing.shells
         if x0 is None:
-            fe = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.wrinkling)[1]
+            fe = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.membrane_law)[1]
         else:
             fe = membrane_discrete_gradient(x0[sh.conn], x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack,
-                                            sh.wrinkling)[0]
+                                            sh.membrane_law)[0]
         return np.bincount(self._shell_dofs, weights=fe.ravel(), minlength=self.wing.n_dof)
 
     def membrane_tangent_correction(self, x: np.ndarray, x0: np.ndarray) -> np.ndarray:
@@ -512,9 +512,9 @@ class WingDynamics:
         ``x`` that the structure's assembly already holds. Without it the modified Newton iteration stalls where
         the membrane's state (taut, wrinkled, slack) differs between the step's end and its midpoint."""
         sh = self.wing.shells
-        K1 = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.wrinkling)[2]
+        K1 = membrane_internal(x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack, sh.membrane_law)[2]
         Ka = membrane_discrete_gradient(x0[sh.conn], x[sh.conn], sh.G, sh.A0h, sh.E, sh.nu, sh.C, sh.eps_slack,
-                                        sh.wrinkling, tangent=True)[3]
+                                        sh.membrane_law, tangent=True)[3]
         dK = Ka / (1.0 - self.alpha.alpha_f) - K1
         return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.solver.asm.nnz)
 

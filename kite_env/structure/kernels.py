@@ -65,6 +65,9 @@ _TSMALL = 0.2  # beam._tinv_derivative_coeffs: series of eta'/t and c'/t
 _LOGROT_SMALL = 1e-4  # shell_bending._log_rotation: series of atan2(s, c)/s
 _LOGROT_FAR = 1e-3  # shell_bending._log_rotation: cos(t) below this -> quaternion logm
 _TAUT_TOL = 1e-12  # shell_membrane.TAUT_TOL
+_WRINKLE_MAX_ITER = 30  # shell_membrane._WRINKLE_MAX_ITER
+_WRINKLE_MAX_STEP = 0.3  # shell_membrane._WRINKLE_MAX_STEP
+_WRINKLE_STEP_TOL = 1e-13  # shell_membrane._WRINKLE_STEP_TOL
 
 
 def resolve_backend(backend: str = "auto") -> str:
@@ -663,6 +666,53 @@ def beam_internal(x_e, R_e, R0, L0, EA, k11, k12, kmat, f_out, K_out, U_out, wan
 
 # ============================================================================================ shell
 @njit(**_JIT)
+def _wrinkle_terms(c00, c01, c02, c11, c12, c22, S0, S1, S2, t):
+    """Terms of the wrinkled energy at the angle ``t`` (shell_membrane.relaxed_general, ``terms``)."""
+    c2, s2 = math.cos(2.0 * t), math.sin(2.0 * t)
+    v0, v1, v2 = 0.5 * (1.0 + c2), 0.5 * (1.0 - c2), s2
+    t0, t1, t2 = -s2, s2, 2.0 * c2
+    a0 = c00 * v0 + c01 * v1 + c02 * v2
+    a1 = c01 * v0 + c11 * v1 + c12 * v2
+    a2 = c02 * v0 + c12 * v1 + c22 * v2
+    b0 = c00 * t0 + c01 * t1 + c02 * t2
+    b1 = c01 * t0 + c11 * t1 + c12 * t2
+    b2 = c02 * t0 + c12 * t1 + c22 * t2
+    s = S0 * v0 + S1 * v1 + S2 * v2
+    st = S0 * t0 + S1 * t1 + S2 * t2
+    stt = -2.0 * c2 * S0 + 2.0 * c2 * S1 - 4.0 * s2 * S2
+    d = v0 * a0 + v1 * a1 + v2 * a2
+    dt = 2.0 * (t0 * a0 + t1 * a1 + t2 * a2)
+    dtt = 2.0 * ((t0 * b0 + t1 * b1 + t2 * b2) + (-2.0 * c2 * a0 + 2.0 * c2 * a1 - 4.0 * s2 * a2))
+    w = -s / d
+    wt = -(st * d - s * dt) / (d * d)
+    W_t = w * st + 0.5 * w * w * dt
+    W_tt = wt * st + w * stt + w * wt * dt + 0.5 * w * w * dtt
+    return a0, a1, a2, b0, b1, b2, s, d, w, wt, W_t, W_tt
+
+
+@njit(**_JIT)
+def _wrinkled_general(c00, c01, c02, c11, c12, c22, S0, S1, S2):
+    """The wrinkled state of the relaxed law of any plane-stress matrix (shell_membrane.relaxed_general): energy
+    change ``w s / 2``, stress ``S + w a`` and the tangent's corrections ``a a^T / d + g g^T / W_tt``, as the angle
+    ``t``'s Newton iteration from the most compressive direction of the taut stress ``(S0, S1, S2)``."""
+    t = 0.5 * math.atan2(S2, 0.5 * (S0 - S1)) + 0.5 * math.pi
+    for _ in range(_WRINKLE_MAX_ITER):
+        W_t, W_tt = _wrinkle_terms(c00, c01, c02, c11, c12, c22, S0, S1, S2, t)[10:]
+        if W_tt > 0.0:
+            step = -W_t / W_tt
+        else:
+            step = -_WRINKLE_MAX_STEP if W_t > 0.0 else _WRINKLE_MAX_STEP
+        step = min(max(step, -_WRINKLE_MAX_STEP), _WRINKLE_MAX_STEP)
+        t += step
+        if abs(step) <= _WRINKLE_STEP_TOL:
+            break
+    a0, a1, a2, b0, b1, b2, s, d, w, wt, W_t, W_tt = _wrinkle_terms(c00, c01, c02, c11, c12, c22, S0, S1, S2, t)
+    g0, g1, g2 = wt * a0 + w * b0, wt * a1 + w * b1, wt * a2 + w * b2
+    curv = 1.0 / W_tt if W_tt > 0.0 else 0.0
+    return 0.5 * w * s, w * a0, w * a1, w * a2, a0, a1, a2, 1.0 / d, g0, g1, g2, curv
+
+
+@njit(**_JIT)
 def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending, f_out, K_out, U_out, want_K=True):
     """Flat shell triangles (relaxed SVK membrane + co-rotational DKT + drilling), as ``ShellSet.internal``.
 
@@ -708,6 +758,30 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
             for i in range(3):
                 for j in range(3):
                     D[i, j] = C[e, i, j]
+        elif wrinkling == 2:  # the relaxed law of any C (shell_membrane.relaxed_general)
+            hs = 0.5 * (Sf0 - Sf1)
+            s_min = 0.5 * (Sf0 + Sf1) - math.sqrt(hs * hs + Sf2 * Sf2)
+            taut = s_min > -_TAUT_TOL * 0.5 * (C[e, 0, 0] + C[e, 1, 1])
+            E1 = 0.5 * (Ev0 + Ev1) + math.sqrt((0.5 * (Ev0 - Ev1)) ** 2 + (0.5 * Ev2) ** 2)
+            wrink = (E1 > 0.0) and not taut
+            cT = (1.0 - eps) * (1.0 if taut else 0.0) + eps
+            cW = (1.0 - eps) * (1.0 if wrink else 0.0)
+            for i in range(3):
+                for j in range(3):
+                    D[i, j] = (cT + cW) * C[e, i, j]
+            Wd = (cT + cW) * Wf
+            S[0], S[1], S[2] = (cT + cW) * Sf0, (cT + cW) * Sf1, (cT + cW) * Sf2
+            if wrink:
+                dW, dS0, dS1, dS2, a0, a1, a2, di, g0, g1, g2, curv = _wrinkled_general(
+                    C[e, 0, 0], C[e, 0, 1], C[e, 0, 2], C[e, 1, 1], C[e, 1, 2], C[e, 2, 2], Sf0, Sf1, Sf2)
+                Wd += cW * dW
+                S[0] += cW * dS0
+                S[1] += cW * dS1
+                S[2] += cW * dS2
+                aw, gw = (a0, a1, a2), (g0, g1, g2)
+                for i in range(3):
+                    for j in range(3):
+                        D[i, j] -= cW * (aw[i] * aw[j] * di + gw[i] * gw[j] * curv)
         else:
             mean = 0.5 * (Ev0 + Ev1)
             hd = 0.5 * (Ev0 - Ev1)

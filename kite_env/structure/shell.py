@@ -42,8 +42,8 @@ from __future__ import annotations
 import numpy as np
 
 from .shell_bending import bending_internal, dkt_stiffness, element_frame, local_rotations
-from .shell_membrane import SLACK, TAUT, WRINKLED, cst_reference, membrane_internal, plane_stress_matrix, \
-    principal_strains
+from .shell_membrane import SLACK, TAUT, WRINKLED, cst_reference, fabric_matrix, membrane_internal, \
+    plane_stress_matrix, principal_strains
 
 __all__ = ["ShellSet", "pressure_load", "TAUT", "WRINKLED", "SLACK"]
 
@@ -71,6 +71,14 @@ class ShellSet:
         Drilling stiffness ``k_d = drill_factor * E h A0`` [N m/rad] per node and element.
     bending : bool
         Include the DKT bending and drilling part (False: pure membrane, rotations get no stiffness).
+    shear_ratio : float [-]
+        In-plane shear modulus of the fabric as a fraction of the isotropic ``E / (2 (1 + nu))`` (1: the isotropic
+        law of the paper). Any other value makes the membrane a balanced woven fabric
+        (:func:`.shell_membrane.fabric_matrix`) with its threads along ``warp`` and the relaxed law of any material
+        matrix (:func:`.shell_membrane.relaxed_general`).
+    warp : (3,) float
+        Direction of the warp threads in the frame of ``X0``, projected onto each triangle's plane (the weft is
+        perpendicular in the plane); used with ``shear_ratio != 1``.
     backend : {"auto", "numba", "numpy"}
         Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.shell_internal`
         or the vectorised NumPy reference (same result to round-off); ``"auto"`` resolves with
@@ -81,7 +89,7 @@ class ShellSet:
     n_en = 3  # nodes per element
 
     def __init__(self, conn, X0, E, nu, h, wrinkling=True, eps_slack=1e-3, drill_factor=1e-6, bending=True,
-                 backend="auto"):
+                 shear_ratio=1.0, warp=(1.0, 0.0, 0.0), backend="auto"):
         from . import kernels  # imports numba (once per process)
 
         self.backend = kernels.resolve_backend(backend)
@@ -106,7 +114,22 @@ class ShellSet:
         self.R0 = fr["Rr"]  # (n_e, 3, 3) reference element frames
         self.xy = np.einsum("nia,nki->nka", self.R0, Xe - Xe[:, :1])[:, :, :2]  # (n_e, 3, 2) local coords
         self.A0, self.G = cst_reference(self.xy)
-        self.C = plane_stress_matrix(self.E, self.nu)
+        if not shear_ratio > 0.0:
+            raise ValueError("ShellSet: need shear_ratio > 0")
+        self.shear_ratio = float(shear_ratio)
+        # membrane law of the kernels: 0 plain SVK, 1 isotropic relaxed, 2 relaxed law of any C
+        self.membrane_law = int(self.wrinkling)
+        if self.shear_ratio == 1.0:
+            self.C = plane_stress_matrix(self.E, self.nu)
+            self.warp_angle = None
+        else:
+            wv = np.asarray(warp, dtype=float)
+            wl = np.einsum("nia,i->na", self.R0[:, :, :2], wv)  # the warp in each element's reference axes
+            if np.any(np.hypot(wl[:, 0], wl[:, 1]) < 1e-3 * np.linalg.norm(wv)):
+                raise ValueError("ShellSet: the warp direction is normal to a triangle")
+            self.warp_angle = np.arctan2(wl[:, 1], wl[:, 0])
+            self.C = fabric_matrix(self.E, self.nu, self.shear_ratio, self.warp_angle)
+            self.membrane_law = 2 if self.wrinkling else 0
         self.A0h = self.A0 * self.h
         self.D_bend = self.E * self.h**3 / (12.0 * (1.0 - self.nu**2))
         self.k_drill = self.drill_factor * self.E * self.h * self.A0
@@ -124,7 +147,7 @@ class ShellSet:
     # ------------------------------------------------------------------------------------------ evaluation
     def _membrane(self, x_e):
         return membrane_internal(np.asarray(x_e, dtype=float), self.G, self.A0h, self.E, self.nu, self.C,
-                                 self.eps_slack, self.wrinkling)
+                                 self.eps_slack, self.membrane_law)
 
     def energy(self, x_e, R_e) -> np.ndarray:
         """Strain energy of each element, ``(n_e,)`` [J] (membrane + bending + drilling)."""
@@ -171,7 +194,7 @@ class ShellSet:
         f = np.empty((n, 18))
         K = np.empty((n, 18, 18) if tangent else (1, 18, 18))
         shell_internal(x_e, R_e, self.R0, self.G, self.A0h, self.E, self.nu, self.C, self.K_l, self.eps_slack,
-                       self.wrinkling, self.bending, f, K, np.empty(n), bool(tangent))
+                       self.membrane_law, self.bending, f, K, np.empty(n), bool(tangent))
         return f, (K if tangent else None)
 
     def _internal_numpy(self, x_e, R_e):

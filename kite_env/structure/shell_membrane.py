@@ -142,6 +142,113 @@ def relaxed_svk(Ev: np.ndarray, Y: np.ndarray, nu: np.ndarray, C: np.ndarray, ep
     return W, S, D, state
 
 
+def fabric_matrix(Y: np.ndarray, nu: np.ndarray, shear_ratio: float, angle: np.ndarray) -> np.ndarray:
+    """Plane-stress matrix of a balanced woven fabric in the element axes; ``(n,) x 3 -> (n, 3, 3)`` [Pa].
+
+    In the thread axes (warp 1, weft 2, equal moduli): ``C_m = [[c, nu c, 0], [nu c, c, 0], [0, 0, r G_iso]]`` with
+    ``c = Y / (1 - nu^2)``, ``G_iso = Y / (2 (1 + nu))`` and ``r = shear_ratio`` (1: the isotropic law). ``angle`` is
+    the warp's angle from the element's first reference axis; with the strain transformation ``T`` (Voigt, engineering
+    shear) ``E_m = T E``, the energy ``E_m^T C_m E_m / 2`` gives ``C = T^T C_m T`` in the element axes.
+    """
+    C = plane_stress_matrix(Y, nu)
+    C[..., 2, 2] *= float(shear_ratio)
+    c, s = np.cos(angle), np.sin(angle)
+    T = np.zeros(np.shape(angle) + (3, 3))
+    T[..., 0, :] = np.stack([c * c, s * s, c * s], axis=-1)
+    T[..., 1, :] = np.stack([s * s, c * c, -c * s], axis=-1)
+    T[..., 2, :] = np.stack([-2.0 * c * s, 2.0 * c * s, c * c - s * s], axis=-1)
+    return np.einsum("...ki,...kl,...lj->...ij", T, C, T)
+
+
+def relaxed_general(Ev: np.ndarray, C: np.ndarray, eps: float):
+    """Relaxed (tension-field) law of any plane-stress matrix ``C`` (an orthotropic fabric): as :func:`relaxed_svk`.
+
+    The relaxed energy ``W_rel(E) = min_{P >= 0} W(E + P)`` (Pipkin 1986; Steigmann 1990), ``W(E) = E^T C E / 2``,
+    is a convex problem over the cone of positive semi-definite wrinkle strains ``P``. Its minimiser is
+    ``P = 0`` where the stress ``C E`` is positive semi-definite (taut), ``P = -E`` where the strain is negative
+    semi-definite (slack: ``W = 0``), else of rank one, ``P = w m m^T`` with the wrinkle direction ``m = (cos t,
+    sin t)``. For an anisotropic law ``m`` is not a principal direction of the strain or of the stress (Roddeman et
+    al. 1987; Kang & Im 1997 treat the isotropic case): with ``v(t) = [cos^2 t, sin^2 t, 2 sin t cos t]`` (``m m^T``
+    in Voigt strain form), ``a = C v``, ``s = a . E`` (the taut law's normal stress along ``m``) and ``d = v . a``,
+    the minimum over ``w >= 0`` is ``w = -s / d`` and::
+
+        W_rel(E) = min_t [W(E) - s(t)^2 / (2 d(t))],     S = C E + w a     (uniaxial: S m = 0),
+
+    found by Newton's method in ``t`` from the most compressive direction of ``C E`` (exact for an isotropic law).
+    The tangent is the derivative of ``S`` with ``t`` following ``E`` (implicit function theorem):
+    ``D = C - a a^T / d - g g^T / W_tt``, ``g = dS/dt = w_t a + w C v_t``, ``W_tt = d^2 W_rel / dt^2 > 0`` at the
+    minimum. Regularised as :func:`relaxed_svk` (``eps`` of the full energy). For an isotropic ``C`` it equals
+    :func:`relaxed_svk` to round-off (``tests/structure/test_membrane.py``).
+    """
+    Ev = np.asarray(Ev, dtype=float)
+    S_full = np.einsum("nij,nj->ni", C, Ev)
+    W_full = 0.5 * np.einsum("ni,ni->n", S_full, Ev)
+    hs = 0.5 * (S_full[:, 0] - S_full[:, 1])
+    s_min = 0.5 * (S_full[:, 0] + S_full[:, 1]) - np.hypot(hs, S_full[:, 2])
+    scale = 0.5 * (C[:, 0, 0] + C[:, 1, 1])
+    taut = s_min > -TAUT_TOL * scale
+    E1 = principal_strains(Ev)[0]
+    wrink = (E1 > 0.0) & ~taut
+    state = np.where(taut, TAUT, np.where(wrink, WRINKLED, SLACK))
+    # Newton in t on the wrinkled elements, from the most compressive direction of C E
+    t = 0.5 * np.arctan2(S_full[:, 2], hs) + 0.5 * np.pi
+
+    def terms(t):
+        c2, s2 = np.cos(2.0 * t), np.sin(2.0 * t)
+        v = np.stack([0.5 * (1.0 + c2), 0.5 * (1.0 - c2), s2], axis=-1)
+        vt = np.stack([-s2, s2, 2.0 * c2], axis=-1)
+        vtt = np.stack([-2.0 * c2, 2.0 * c2, -4.0 * s2], axis=-1)
+        a = np.einsum("nij,nj->ni", C, v)
+        at = np.einsum("nij,nj->ni", C, vt)
+        s = np.einsum("ni,ni->n", S_full, v)
+        st = np.einsum("ni,ni->n", S_full, vt)
+        stt = np.einsum("ni,ni->n", S_full, vtt)
+        d = np.einsum("ni,ni->n", v, a)
+        dt = 2.0 * np.einsum("ni,ni->n", vt, a)
+        dtt = 2.0 * (np.einsum("ni,ni->n", vt, at) + np.einsum("ni,ni->n", a, vtt))
+        w = -s / d
+        wt = -(st * d - s * dt) / d**2
+        W_t = w * st + 0.5 * w**2 * dt
+        W_tt = wt * st + w * stt + w * wt * dt + 0.5 * w**2 * dtt
+        return a, at, s, d, w, wt, W_t, W_tt
+
+    for _ in range(_WRINKLE_MAX_ITER):
+        W_t, W_tt = terms(t)[6:]
+        step = np.where(W_tt > 0.0, -W_t / np.where(W_tt > 0.0, W_tt, 1.0), -np.sign(W_t) * _WRINKLE_MAX_STEP)
+        step = np.where(wrink, np.clip(step, -_WRINKLE_MAX_STEP, _WRINKLE_MAX_STEP), 0.0)
+        t = t + step
+        if np.all(np.abs(step) <= _WRINKLE_STEP_TOL):
+            break
+    a, at, s, d, w, wt, W_t, W_tt = terms(t)
+    g = wt[:, None] * a + w[:, None] * at
+    curv = np.where(W_tt > 0.0, 1.0 / np.where(W_tt > 0.0, W_tt, 1.0), 0.0)
+    S_w = S_full + w[:, None] * a
+    D_w = C - a[:, :, None] * a[:, None, :] / d[:, None, None] - curv[:, None, None] * g[:, :, None] * g[:, None, :]
+    W_w = W_full + 0.5 * w * s
+    wr = wrink.astype(float)
+    ta = taut.astype(float)
+    k = 1.0 - eps
+    W = (k * ta + eps) * W_full + k * wr * np.where(wrink, W_w, 0.0)
+    S = (k * ta + eps)[:, None] * S_full + (k * wr)[:, None] * np.where(wrink[:, None], S_w, 0.0)
+    D = (k * ta + eps)[:, None, None] * C + (k * wr)[:, None, None] * np.where(wrink[:, None, None], D_w, 0.0)
+    return W, S, D, state
+
+
+#: Newton in the wrinkle angle of :func:`relaxed_general`: at most this many iterations, steps within this bound [rad],
+#: converged when every step is below the tolerance [rad]
+_WRINKLE_MAX_ITER = 30
+_WRINKLE_MAX_STEP = 0.3
+_WRINKLE_STEP_TOL = 1e-13
+
+
+def membrane_law(Ev, Y, nu, C, eps, wrinkling):
+    """The membrane law of ``wrinkling``: 0 (False) plain SVK, 1 (True) the isotropic relaxed law
+    (:func:`relaxed_svk`), 2 the relaxed law of any ``C`` (:func:`relaxed_general`)."""
+    if int(wrinkling) == 2:
+        return relaxed_general(Ev, C, eps)
+    return relaxed_svk(Ev, Y, nu, C, eps, bool(wrinkling))
+
+
 def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C, eps, wrinkling):
     """Membrane energy, internal force and tangent w.r.t. the 9 nodal translations.
 
@@ -160,7 +267,7 @@ def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C,
     F = np.einsum("nai,naI->niI", x_e, G)
     CG = np.einsum("niI,niJ->nIJ", F, F)
     Ev = np.stack([0.5 * (CG[:, 0, 0] - 1.0), 0.5 * (CG[:, 1, 1] - 1.0), CG[:, 0, 1]], axis=-1)
-    W, S, D, state = relaxed_svk(Ev, Y, nu, C, eps, wrinkling)
+    W, S, D, state = membrane_law(Ev, Y, nu, C, eps, wrinkling)
     # B[:, v, (a, i)] = dE_v / dx_ai
     B = np.empty((n, 3, 3, 3))
     B[:, 0] = G[:, :, 0, None] * F[:, None, :, 0]
@@ -208,9 +315,9 @@ def membrane_discrete_gradient(x0_e: np.ndarray, x1_e: np.ndarray, G: np.ndarray
         return np.stack([0.5 * (CG[:, 0, 0] - 1.0), 0.5 * (CG[:, 1, 1] - 1.0), CG[:, 0, 1]], axis=-1)
 
     E0, E1 = strain(F0), strain(F1)
-    W0 = relaxed_svk(E0, Y, nu, C, eps, wrinkling)[0]
-    W1, S1, _, _ = relaxed_svk(E1, Y, nu, C, eps, wrinkling)
-    _, Sm, D, _ = relaxed_svk(0.5 * (E0 + E1), Y, nu, C, eps, wrinkling)
+    W0 = membrane_law(E0, Y, nu, C, eps, wrinkling)[0]
+    W1, S1, _, _ = membrane_law(E1, Y, nu, C, eps, wrinkling)
+    _, Sm, D, _ = membrane_law(0.5 * (E0 + E1), Y, nu, C, eps, wrinkling)
     dE = E1 - E0
     P = np.array([1.0, 1.0, 0.5])
     nE = dE * P  # the tensor dE in Voigt stress form: S_c . dE = c (dE : dE)

@@ -80,11 +80,11 @@ def _assert_shells_agree(s_args, x, R, **kw):
     assert K3 is None and np.array_equal(f3, f1)
     n = sn.n_elem
     U = np.empty(n)
-    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.wrinkling,
+    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
                            sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U)
     _assert_energy_agree(U, sp.energy(x, R), K2, x)
     U3 = np.empty(n)
-    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.wrinkling,
+    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
                            sn.bending, np.empty((n, 18)), np.empty((1, 18, 18)), U3, False)
     assert np.array_equal(U3, U)
     return sp
@@ -114,6 +114,9 @@ def test_thresholds_equal_reference_modules():
     assert kernels._ROT_SMALL == rotations._SMALL
     assert kernels._TSMALL == beam._TSMALL
     assert kernels._TAUT_TOL == shell_membrane.TAUT_TOL
+    assert kernels._WRINKLE_MAX_ITER == shell_membrane._WRINKLE_MAX_ITER
+    assert kernels._WRINKLE_MAX_STEP == shell_membrane._WRINKLE_MAX_STEP
+    assert kernels._WRINKLE_STEP_TOL == shell_membrane._WRINKLE_STEP_TOL
     assert "small = t < 1e-4" in inspect.getsource(rotations.tangent_inv) and kernels._TINV_SMALL == 1e-4
     src = inspect.getsource(shell_bending._log_rotation)
     assert "small = s < 1e-4" in src and kernels._LOGROT_SMALL == 1e-4
@@ -240,14 +243,18 @@ def test_stress_free_shells_agree():
         assert np.all(sp.stresses(x)["state"] == TAUT)
 
 
+@pytest.mark.parametrize("shear_ratio", [1.0, 0.05])
 @pytest.mark.parametrize("amp", [0.0, 0.01, 0.1])
-def test_kite_mesh_shells_agree(kite, amp):
-    """The 360 canopy triangles of the rhino16 mesh, unloaded and deformed (mixed membrane states)."""
+def test_kite_mesh_shells_agree(kite, amp, shear_ratio):
+    """The 360 canopy triangles of the rhino16 mesh, unloaded and deformed (mixed membrane states); isotropic and
+    a woven fabric (the relaxed law of any material matrix, shell_membrane.relaxed_general)."""
     rng = np.random.default_rng(32)
     x = kite.nodes + amp * rng.normal(size=kite.nodes.shape)
     Rn = expm(5 * amp * rng.normal(size=kite.nodes.shape))
     conn = kite.shells
-    sp = _assert_shells_agree((conn, kite.nodes, E_CANOPY, NU, H_CANOPY), x[conn], Rn[conn])
+    sp = _assert_shells_agree((conn, kite.nodes, E_CANOPY, NU, H_CANOPY), x[conn], Rn[conn],
+                              shear_ratio=shear_ratio)
+    assert sp.membrane_law == (1 if shear_ratio == 1.0 else 2)
     if amp > 0.05:
         assert len(set(sp.stresses(x[conn])["state"].tolist())) == 3
 
