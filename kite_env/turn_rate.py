@@ -85,3 +85,89 @@ def turn_rate_table(cfg: Config, dls_m=(-0.2, 0.1, 0.2, 0.3), wind_speeds_mps=(5
             rows.append({"wind_mps": float(w), "dl_m": float(dl), "yaw_rate_rad_s": d, "per_m": d / dl,
                          "airspeed_mps": r.airspeed_mps, "end": r.end if r.end == "ok" else f"{r.end} at {r.t_end_s:.2f} s"})
     return rows
+
+
+# ------------------------------------------------------------------ where a steering input goes
+#: element groups of :func:`steering_point_stiffness`, in its ``parts`` order
+STIFFNESS_PARTS = ("LE tube", "struts", "TE", "tip rods", "canopy", "aero")
+
+
+@dataclass(frozen=True)
+class SteeringStiffness:
+    """Stiffness of the wing at a steering-line point along its line (A, C and the other steering point held).
+
+    ``coupled_N_per_m``: with the aerodynamic loads following the shape (the monolithic tangent);
+    ``frozen_N_per_m``: with the loads held; ``parts_N_per_m``: ``u^T K_g u`` of each group ``g`` of
+    :data:`STIFFNESS_PARTS` along the coupled deformation ``u`` (they sum to ``coupled_N_per_m``; the aerodynamic part
+    is minus the work the loads do along ``u``); ``share``: the part of a change of the line's rest length that
+    becomes motion of the point, ``k_line / (k_line + coupled)``; ``pitch_per_m``: the sections' pitch change per
+    metre of the point's motion [rad/m] along the span (positive: the trailing edge moves towards ``-z_k``, the
+    section's angle of attack grows).
+    """
+
+    point: str
+    coupled_N_per_m: float
+    frozen_N_per_m: float
+    parts_N_per_m: dict
+    share: float
+    pitch_per_m: np.ndarray
+
+
+def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: float) -> list[SteeringStiffness]:
+    """Linearised stiffness of ``wing`` (an :class:`~kite_env.fsi.AeroelasticWing` at its last solved state) at B and
+    D along their steering lines towards the KCU at ``kcu_K`` (frame K), with A-D's translations held except the
+    point moved (the static condensation of the tangent ``K_T - dF_a/dx`` onto that point's line direction).
+
+    This says where a steering input goes: a change ``dL`` of a line's rest length moves its wing point by
+    ``share dL`` and stretches the line by the rest (docs/flight_model.md, section 26).
+    """
+    from kite_env.fsi import load_jacobian
+    from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
+    from kite_env.structure.assembly import element_dofs
+
+    st, m = wing.state, wing.mesh
+    wing._update_tube_stiffness(st, material_tangent=True)
+    n_dof = 6 * m.n_nodes
+    groups = {g: np.zeros((n_dof, n_dof)) for g in STIFFNESS_PARTS}
+    _, Kb = wing.beams.internal(st.x[m.beams], st.Rn[m.beams])
+    dof_b = element_dofs(m.beams)
+    for g, code in zip(STIFFNESS_PARTS[:4], (BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP)):
+        for e in np.flatnonzero(m.beam_kind == code):
+            groups[g][np.ix_(dof_b[e], dof_b[e])] += Kb[e]
+    _, Ks = wing.shells.internal(st.x[m.shells], st.Rn[m.shells])
+    for e, d in enumerate(element_dofs(m.shells)):
+        groups["canopy"][np.ix_(d, d)] += Ks[e]
+    fl = wing._downwashed(flight)
+    _, J = load_jacobian(st.x[m.sections], m.section_tube_d, m.section_width, fl.v_kite, fl.omega, fl.v_wind,
+                         wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+    for i, sec in enumerate(m.sections):
+        d = (6 * sec[:, None] + np.arange(3)[None, :]).ravel()
+        groups["aero"][np.ix_(d, d)] -= J[i]
+    K_struct = sum(groups[g] for g in STIFFNESS_PARTS[:5])
+    K = K_struct + groups["aero"]
+    held = (6 * wing.bridle[:, None] + np.arange(3)[None, :]).ravel()
+    free = np.setdiff1d(np.flatnonzero(np.any(K != 0.0, axis=1)), held)
+    le, te = m.sections[:, 0], m.sections[:, -1]
+    out = []
+    for name, node in (("B", wing.bridle[1]), ("D", wing.bridle[3])):
+        e = kcu_K - st.x[node]
+        e /= np.linalg.norm(e)
+        dp = 6 * node + np.arange(3)
+
+        def mode(KK):
+            u = np.zeros(n_dof)
+            u[dp] = e
+            u[free] = -np.linalg.solve(KK[np.ix_(free, free)], KK[np.ix_(free, dp)] @ e)
+            return u
+
+        u = mode(K)
+        uf = mode(K_struct)
+        k = float(u @ K @ u)
+        # pitch of each section's LE-TE chord about y_k, linearised: d(atan2(-c_z, c_x))
+        c = st.x[te] - st.x[le]
+        dc = (u.reshape(-1, 6)[te, :3] - u.reshape(-1, 6)[le, :3])
+        pitch = (-dc[:, 2] * c[:, 0] + c[:, 2] * dc[:, 0]) / (c[:, 0] ** 2 + c[:, 2] ** 2)
+        out.append(SteeringStiffness(point=name, coupled_N_per_m=k, frozen_N_per_m=float(uf @ K_struct @ uf),
+                                     parts_N_per_m={g: float(u @ groups[g] @ u) for g in STIFFNESS_PARTS},
+                                     share=k_line_N_per_m / (k_line_N_per_m + k), pitch_per_m=pitch))
+    return out

@@ -1,0 +1,69 @@
+"""Where a steering input goes (kite_env.turn_rate.steering_point_stiffness): the wing's linearised stiffness at the
+steering-line points along their lines, checked against the static aeroelastic solve (docs/flight_model.md, 26)."""
+
+import numpy as np
+import pytest
+
+from kite_env.config import load_config
+from kite_env.fsi import FlightState
+from kite_env.polar import nominal_wing
+from kite_env.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
+
+K_LINE = 4.52e3  # Table 1
+
+
+def _loaded_wing(*overrides):
+    wing = nominal_wing("rhino16", load_config(None, list(overrides)))
+    flight = FlightState.wind_tunnel(25.0, np.deg2rad(8.0))
+    sol = wing.solve(None, flight, warm=False)
+    return wing, flight, sol
+
+
+@pytest.fixture(scope="module")
+def loaded():
+    wing, flight, sol = _loaded_wing()
+    return wing, flight, sol, steering_point_stiffness(wing, flight, wing.kcu_position(), K_LINE)
+
+
+def test_the_condensed_stiffness_is_the_static_solves_force_change(loaded):
+    """Moving B or D by +-1 mm along its line (the static solve, A-D prescribed): the change of the reaction along
+    the line over the motion equals the linearised stiffness (central difference), and the groups sum to it."""
+    wing, flight, sol, rows = loaded
+    kcu = wing.kcu_position()
+    for r, j in zip(rows, (1, 3)):
+        node = wing.bridle[j]
+        e = (kcu - sol.nodes[node]) / np.linalg.norm(kcu - sol.nodes[node])
+        dF = []
+        for d in (1e-3, -1e-3):
+            q = wing.design_bridle.copy()
+            q[j] += d * e
+            dF.append((wing.solve(q, flight, commit=False).F_b[j] - sol.F_b[j]) @ e)
+        k_fd = (dF[0] - dF[1]) / 2e-3
+        assert r.coupled_N_per_m == pytest.approx(k_fd, rel=1e-3)
+        assert sum(r.parts_N_per_m[g] for g in STIFFNESS_PARTS) == pytest.approx(r.coupled_N_per_m, rel=1e-9)
+        assert r.share == pytest.approx(K_LINE / (K_LINE + r.coupled_N_per_m))
+
+
+def test_the_symmetric_wing_is_equally_stiff_at_both_steering_points_and_its_tip_turns_about_the_front_point(loaded):
+    """At zero sideslip B and D mirror each other; the moved point's tip section pitches about the front point A
+    (C), by about one radian per tip chord |A - B| of motion, and the other tip hardly moves."""
+    wing, _, sol, (rB, rD) = loaded
+    assert rB.coupled_N_per_m == pytest.approx(rD.coupled_N_per_m, rel=1e-4)
+    assert np.allclose(rB.pitch_per_m, rD.pitch_per_m[::-1], atol=1e-3 * np.max(np.abs(rB.pitch_per_m)))
+    chord = np.linalg.norm(sol.nodes[wing.bridle[0]] - sol.nodes[wing.bridle[1]])
+    assert rB.pitch_per_m[0] == pytest.approx(1.0 / chord, rel=0.15)
+    assert abs(rB.pitch_per_m[-1]) < 0.02 * rB.pitch_per_m[0]
+    # the prestressed canopy and the LE tube hold most of it; the loads following the shape do work along it
+    assert rB.parts_N_per_m["canopy"] > 0.5 * rB.coupled_N_per_m
+    assert rB.parts_N_per_m["LE tube"] > 0.25 * rB.coupled_N_per_m
+    assert rB.parts_N_per_m["aero"] < 0.0
+
+
+def test_a_woven_canopy_of_low_shear_modulus_is_softer_at_the_steering_point(loaded):
+    """structure.canopy_shear_ratio=0.1 (a tenth of the isotropic shear modulus): less stiffness at B, a larger
+    share of a steering input reaches the wing (measured: 9.95 -> 6.55 kN/m, share 0.31 -> 0.41)."""
+    iso = loaded[3][0]
+    wing, flight, _ = _loaded_wing("structure.canopy_shear_ratio=0.1")
+    soft = steering_point_stiffness(wing, flight, wing.kcu_position(), K_LINE)[0]
+    assert soft.coupled_N_per_m < 0.8 * iso.coupled_N_per_m
+    assert soft.share > iso.share + 0.05
