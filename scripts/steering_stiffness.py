@@ -7,10 +7,10 @@ Flies the paper's controller with the quasi-static wing (``structure.dynamic=fal
 static aeroelastic equilibrium) and, at each time, linearises the wing at the step's state with A-D held
 (:func:`kite_env.turn_rate.steering_point_stiffness`). A change ``dL`` of a steering line's rest length moves its
 wing point by ``share dL``, ``share = k_line / (k_line + k_wing)``; the rest stretches the line (its stiffness
-``dynamics.line_stiffness_N_per_m``, Table 1: 4.52 kN/m). Columns: the stiffness with the aerodynamic loads following the
-shape (``coupled``) and held (``frozen``) [kN/m], each group's ``u^T K_g u`` along the coupled deformation [kN/m]
-(``aero`` is minus the work the loads do), the share, and the pitch change of the point's tip section per metre
-[deg/m]. docs/flight_model.md, section 26.
+``dynamics.line_stiffness_N_per_m``, Table 1: 4.52 kN/m). Columns: the stiffness with the aerodynamic loads
+following the shape (``coupled``) and held (``frozen``) [kN/m], each group's ``u^T K_g u`` along the coupled
+deformation [kN/m] (``aero`` is minus the work the loads do), the share, and the pitch change of the point's tip
+section per metre [deg/m]. docs/flight_model.md, section 26.
 """
 
 from __future__ import annotations

@@ -722,7 +722,9 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
     R0 : (n, 3, 3) float     reference element frames;  G : (n, 3, 2) float [1/m] shape-function gradients.
     A0h : (n,) float [m^3];  Y, nu : (n,) float [Pa], [-];  C : (n, 3, 3) float [Pa] plane-stress matrices.
     K_l : (n, 9, 9) float [N m]   local bending + drilling stiffness;  eps : float  slack fraction.
-    wrinkling, bending : bool     as the ``ShellSet`` options.
+    wrinkling : int               the membrane law, ``ShellSet.membrane_law``: 0 plain SVK, 1 the isotropic relaxed
+                                  law, 2 the relaxed law of any ``C`` (a woven fabric).
+    bending : bool                as the ``ShellSet`` option.
     f_out : (n, 18), K_out : (n, 18, 18), U_out : (n,) float   outputs (overwritten).
     want_K : bool   compute the tangent; False: only ``f_out`` and ``U_out`` are written (same values), ``K_out`` is
                     left untouched (for the residual-only assemblies of the modified Newton iteration).

@@ -75,7 +75,7 @@ class ShellSet:
         In-plane shear modulus of the fabric as a fraction of the isotropic ``E / (2 (1 + nu))`` (1: the isotropic
         law of the paper). Any other value makes the membrane a balanced woven fabric
         (:func:`.shell_membrane.fabric_matrix`) with its threads along ``warp`` and the relaxed law of any material
-        matrix (:func:`.shell_membrane.relaxed_general`).
+        matrix (:func:`.shell_membrane.relaxed_general`); the bending part stays isotropic.
     warp : (3,) float
         Direction of the warp threads in the frame of ``X0``, projected onto each triangle's plane (the weft is
         perpendicular in the plane); used with ``shear_ratio != 1``.

@@ -172,7 +172,7 @@ def relaxed_general(Ev: np.ndarray, C: np.ndarray, eps: float):
     in Voigt strain form), ``a = C v``, ``s = a . E`` (the taut law's normal stress along ``m``) and ``d = v . a``,
     the minimum over ``w >= 0`` is ``w = -s / d`` and::
 
-        W_rel(E) = min_t [W(E) - s(t)^2 / (2 d(t))],     S = C E + w a     (uniaxial: S m = 0),
+        W_rel(E) = min_t [W(E) - s(t)^2 / (2 d(t))]  (over t with s(t) < 0),     S = C E + w a   (uniaxial: S m = 0),
 
     found by Newton's method in ``t`` from the most compressive direction of ``C E`` (exact for an isotropic law).
     The tangent is the derivative of ``S`` with ``t`` following ``E`` (implicit function theorem):
@@ -256,7 +256,7 @@ def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C,
     ----------
     x_e : (n, 3, 3) float [m]  current node positions.
     G : (n, 3, 2) float [1/m]  reference shape-function gradients; ``A0h`` (n,) [m^3] reference volume.
-    Y, nu, C, eps, wrinkling : material data, see :func:`relaxed_svk`.
+    Y, nu, C, eps : material data, see :func:`relaxed_svk`; ``wrinkling`` the law of :func:`membrane_law` (0, 1, 2).
 
     Returns
     -------

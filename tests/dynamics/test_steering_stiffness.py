@@ -67,3 +67,19 @@ def test_a_woven_canopy_of_low_shear_modulus_is_softer_at_the_steering_point(loa
     soft = steering_point_stiffness(wing, flight, wing.kcu_position(), K_LINE)[0]
     assert soft.coupled_N_per_m < 0.8 * iso.coupled_N_per_m
     assert soft.share > iso.share + 0.05
+
+
+def test_the_script_prints_both_steering_points_at_a_flight_state_and_refuses_bad_input(load_script, capsys):
+    """``scripts/steering_stiffness.py --times 1``: one row for B and one for D at t = 1 s of the baseline, the
+    share within (0, 1) and the tip pitching about one radian per tip chord; a bad time or key: exit 2, one line."""
+    mod = load_script("steering_stiffness")
+    assert mod.main(["--times", "1"]) == 0
+    rows = [ln.split() for ln in capsys.readouterr().out.splitlines()[1:]]
+    assert [r[2] for r in rows] == ["B", "D"]
+    for r in rows:
+        assert float(r[0]) == pytest.approx(1.0, abs=0.03)
+        assert 0.0 < float(r[-2]) < 1.0 and 60.0 < float(r[-1]) < 120.0
+    for bad in (["--times", "-1"], ["--times", "x"], ["--set", "structure.canopy_shear_ratio=2"]):
+        assert mod.main(bad) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("steering_stiffness:")
