@@ -83,3 +83,22 @@ def test_the_script_prints_both_steering_points_at_a_flight_state_and_refuses_ba
         assert mod.main(bad) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("steering_stiffness:")
+
+
+def test_the_open_loop_turn_rate_grows_as_the_share_of_the_input_that_moves_the_wing(loaded):
+    """Three times stiffer bridle lines (an experiment, not the model): the held input's yaw rate grows by the ratio
+    of the shares ``k_line / (k_line + k_wing)`` (measured x1.74 against x1.85 from the wind tunnel's stiffness at B):
+    the turn rate follows the motion of the steering point, which the wing's stiffness there limits."""
+    from kite_env.turn_rate import turn_rate_table
+
+    k_wing = loaded[3][0].coupled_N_per_m
+    rate = {}
+    for k in (K_LINE, 3 * K_LINE):
+        cfg = load_config(None, [f"dynamics.line_stiffness_N_per_m={k}"])
+        (row,) = turn_rate_table(cfg, dls_m=(0.2,), window_s=(0.5, 1.5))
+        assert row["end"] == "ok"
+        rate[k] = row["per_m"]
+    share = {k: k / (k + k_wing) for k in rate}
+    predicted = share[3 * K_LINE] / share[K_LINE]
+    assert rate[3 * K_LINE] / rate[K_LINE] == pytest.approx(predicted, rel=0.15)
+    assert rate[3 * K_LINE] / rate[K_LINE] > 1.5
