@@ -171,3 +171,72 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
                                      parts_N_per_m={g: float(u @ groups[g] @ u) for g in STIFFNESS_PARTS},
                                      share=k_line_N_per_m / (k_line_N_per_m + k), pitch_per_m=pitch))
     return out
+
+
+@dataclass(frozen=True)
+class LateralBalance:
+    """The quasi-steady lateral balance of :func:`lateral_balance`.
+
+    ``derivatives``: the static wing's yaw moment ``N`` about ``z_k`` (through the origin of K) and side force ``Y``
+    along ``y_k`` per metre of the steering points' antisymmetric motion (``N_delta`` [N m/m], ``Y_delta`` [N/m]: B
+    towards the KCU, D away), per radian of sideslip (``N_beta`` [N m], ``Y_beta`` [N]) and per yaw rate about ``z_k``
+    (``N_r`` [N m s], ``Y_r`` [N s]); ``share`` as :class:`SteeringStiffness`; ``beta_per_m`` [rad/m] and
+    ``rate_per_point_m`` [rad/s per m] the steady sideslip and yaw rate per metre of that motion;
+    ``rate_per_input_m`` [rad/s per m] the yaw rate per metre of steering input ``L_B - L_D``;
+    ``damping_only_per_input_m`` the same from the yaw moment against ``N_r`` alone (no sideslip; at the flight states
+    measured about five times larger and of the other sign: the kite turns towards its side force).
+    """
+
+    derivatives: dict
+    share: float
+    beta_per_m: float
+    rate_per_point_m: float
+    rate_per_input_m: float
+    damping_only_per_input_m: float
+
+
+def lateral_balance(cfg: Config, airspeed_mps: float, alpha_rad: float, delta_m: float = 0.01,
+                    beta_rad: float = np.deg2rad(1.0), rate_rad_s: float = 0.2) -> LateralBalance:
+    """Why the kite turns as fast as it does: the steady turn of a wing whose side force and yaw moment both vanish.
+
+    The static wing (A-D prescribed) in a uniform flow of ``airspeed_mps`` at kite angle ``alpha_rad`` gives, by
+    one-sided differences (steps ``delta_m``, ``beta_rad``, ``rate_rad_s``), the derivatives of its yaw moment and side
+    force with respect to the steering points' antisymmetric motion ``delta``, the sideslip ``beta`` and the yaw rate
+    ``r``. Setting ``Y_delta delta + Y_beta beta + Y_r r = 0`` and ``N_delta delta + N_beta beta + N_r r = 0`` (the
+    wing's mass, gravity and the tether neglected) gives ``r / delta = (Y_beta N_delta - N_beta Y_delta) / (N_beta Y_r
+    - Y_beta N_r)``; a change ``dL`` of ``L_B - L_D`` moves each point by ``share dL / 2``
+    (:func:`steering_point_stiffness`), towards the KCU at B for ``dL < 0``. docs/flight_model.md, section 26.
+    """
+    from kite_env.fsi import FlightState
+    from kite_env.polar import nominal_wing
+
+    wing = nominal_wing(cfg.kite.name, cfg)
+    m = wing.mesh
+    flight = FlightState.wind_tunnel(airspeed_mps, alpha_rad)
+    sol0 = wing.solve(None, flight, warm=False)
+
+    def moment_and_side_force(sol):
+        x, F = sol.nodes[m.sections], sol.section_forces
+        return np.array([np.sum(x[..., 0] * F[..., 1] - x[..., 1] * F[..., 0]), np.sum(F[..., 1])])
+
+    base = moment_and_side_force(sol0)
+    kcu = wing.kcu_position()
+    q = wing.design_bridle.copy()
+    for j, sign in ((1, 1.0), (3, -1.0)):
+        e = kcu - sol0.nodes[wing.bridle[j]]
+        q[j] += sign * delta_m * e / np.linalg.norm(e)
+    d_delta = (moment_and_side_force(wing.solve(q, flight, commit=False)) - base) / delta_m
+    slipped = FlightState.wind_tunnel(airspeed_mps, alpha_rad, beta_rad)
+    d_beta = (moment_and_side_force(wing.solve(None, slipped, commit=False)) - base) / beta_rad
+    yawing = FlightState(v_kite=np.zeros(3), omega=np.array([0.0, 0.0, rate_rad_s]), v_wind=flight.v_wind)
+    d_r = (moment_and_side_force(wing.solve(None, yawing, commit=False)) - base) / rate_rad_s
+    (N_d, Y_d), (N_b, Y_b), (N_r, Y_r) = d_delta, d_beta, d_r
+    wing.solve(None, flight, commit=True)  # the base state for the stiffness
+    share = steering_point_stiffness(wing, flight, kcu, cfg.dynamics.line_stiffness_N_per_m)[0].share
+    beta, rate = np.linalg.solve(np.array([[Y_b, Y_r], [N_b, N_r]]), -np.array([Y_d, N_d]))
+    per_input = -0.5 * share  # points' motion per metre of L_B - L_D
+    return LateralBalance(
+        derivatives={"N_delta": float(N_d), "Y_delta": float(Y_d), "N_beta": float(N_b), "Y_beta": float(Y_b),
+                     "N_r": float(N_r), "Y_r": float(Y_r)},
+        share=float(share), beta_per_m=float(beta), rate_per_point_m=float(rate),
+        rate_per_input_m=float(rate * per_input), damping_only_per_input_m=float(-N_d / N_r * per_input))
