@@ -4,8 +4,9 @@ of the baseline flight, split by what supplies it.
     python scripts/steering_stiffness.py [--times 4,6,8,12] [--set section.key=value ...]
 
 Flies the paper's controller with the quasi-static wing (``structure.dynamic=false``: the stiffness is that of the
-static aeroelastic equilibrium) and, at each time, linearises the wing at the step's state with A-D held
-(:func:`kite_env.turn_rate.steering_point_stiffness`). A change ``dL`` of a steering line's rest length moves its
+static aeroelastic equilibrium) and, at each time, solves the wing at the step's end state and linearises it there
+with A-D held (:func:`kite_env.turn_rate.steering_point_stiffness`; the flight goes on from that solution, a warm
+start within the solver's tolerance of its own). A change ``dL`` of a steering line's rest length moves its
 wing point by ``share dL``, ``share = k_line / (k_line + k_wing)``; the rest stretches the line (its stiffness
 ``dynamics.line_stiffness_N_per_m``, Table 1: 4.52 kN/m). Columns: the stiffness with the aerodynamic loads
 following the shape (``coupled``) and held (``frozen``) [kN/m], each group's ``u^T K_g u`` along the coupled
