@@ -9,6 +9,10 @@ flight with ``dL = 0`` is subtracted (gravity and the start turn the kite a litt
 ``psi_dot / dL`` [rad/s per m] at a few speeds is the number the model's steering is judged by: about 5 in the
 paper's Fig. 16 (its two axis scales, +-0.3 m against +-1.5 rad/s), about 2.5-5 in TU Delft V3 flight data
 (README, "Steering authority").
+
+Why it is what it is, on the static wing: :func:`steering_point_stiffness` (how much of a steering input moves the
+wing, and what holds the steering points) and :func:`lateral_balance` (the steady turn in which the steered wing's
+side force and yaw moment vanish); docs/flight_model.md, section 26.
 """
 
 from __future__ import annotations
