@@ -103,6 +103,7 @@ class WingSolution:
     accepted: bool = False  # a Newton solve stalled within fsi.accept_force_rel instead of fsi.tol_force_rel
     section_lift: np.ndarray | None = None  # (n_sec,) magnitude of each section's lift, Eq. (7) [N]
     section_drag: np.ndarray | None = None  # (n_sec,) magnitude of each section's drag, Eq. (8) [N]
+    aero_moment: np.ndarray | None = None  # (3,) moment of the aerodynamic nodal forces about r_k, frame K [N m]
 
     @property
     def lift_to_drag(self) -> float:
@@ -742,7 +743,7 @@ class AeroelasticWing:
             coupling_iters=sum(1 for h in history if "iter" in h), newton_iters=newton_iters, accepted=accepted,
             tube_collapsed=collapsed, section_forces=scale * loads.nodal_forces,
             section_lift=scale * np.linalg.norm(loads.lift_local, axis=1),
-            section_drag=scale * np.linalg.norm(loads.drag_local, axis=1),
+            section_drag=scale * np.linalg.norm(loads.drag_local, axis=1), aero_moment=scale * tot["moment"],
         )
 
 

@@ -136,11 +136,11 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     _, Kb = wing.beams.internal(st.x[m.beams], st.Rn[m.beams])
     dof_b = element_dofs(m.beams)
     for g, code in zip(STIFFNESS_PARTS[:4], (BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP)):
-        for e in np.flatnonzero(m.beam_kind == code):
-            groups[g][np.ix_(dof_b[e], dof_b[e])] += Kb[e]
+        sel = m.beam_kind == code
+        np.add.at(groups[g], (dof_b[sel][:, :, None], dof_b[sel][:, None, :]), Kb[sel])
     _, Ks = wing.shells.internal(st.x[m.shells], st.Rn[m.shells])
-    for e, d in enumerate(element_dofs(m.shells)):
-        groups["canopy"][np.ix_(d, d)] += Ks[e]
+    dof_s = element_dofs(m.shells)
+    np.add.at(groups["canopy"], (dof_s[:, :, None], dof_s[:, None, :]), Ks)
     fl = wing._downwashed(flight)
     _, J = load_jacobian(st.x[m.sections], m.section_tube_d, m.section_width, fl.v_kite, fl.omega, fl.v_wind,
                          wing.cfg.aero.rho_kg_m3, **wing._aero_options())
@@ -215,13 +215,11 @@ def lateral_balance(cfg: Config, airspeed_mps: float, alpha_rad: float, delta_m:
     from kite_env.polar import nominal_wing
 
     wing = nominal_wing(cfg.kite.name, cfg)
-    m = wing.mesh
     flight = FlightState.wind_tunnel(airspeed_mps, alpha_rad)
     sol0 = wing.solve(None, flight, warm=False)
 
     def moment_and_side_force(sol):
-        x, F = sol.nodes[m.sections], sol.section_forces
-        return np.array([np.sum(x[..., 0] * F[..., 1] - x[..., 1] * F[..., 0]), np.sum(F[..., 1])])
+        return np.array([sol.aero_moment[2], sol.aero_force[1]])
 
     base = moment_and_side_force(sol0)
     kcu = wing.kcu_position()

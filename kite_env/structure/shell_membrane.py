@@ -178,7 +178,7 @@ def relaxed_general(Ev: np.ndarray, C: np.ndarray, eps: float):
     The tangent is the derivative of ``S`` with ``t`` following ``E`` (implicit function theorem):
     ``D = C - a a^T / d - g g^T / W_tt``, ``g = dS/dt = w_t a + w C v_t``, ``W_tt = d^2 W_rel / dt^2 > 0`` at the
     minimum. Regularised as :func:`relaxed_svk` (``eps`` of the full energy). For an isotropic ``C`` it equals
-    :func:`relaxed_svk` to round-off (``tests/structure/test_membrane.py``).
+    :func:`relaxed_svk` to round-off (``tests/structure/test_fabric.py``).
     """
     Ev = np.asarray(Ev, dtype=float)
     S_full = np.einsum("nij,nj->ni", C, Ev)
@@ -228,9 +228,9 @@ def relaxed_general(Ev: np.ndarray, C: np.ndarray, eps: float):
     wr = wrink.astype(float)
     ta = taut.astype(float)
     k = 1.0 - eps
-    W = (k * ta + eps) * W_full + k * wr * np.where(wrink, W_w, 0.0)
-    S = (k * ta + eps)[:, None] * S_full + (k * wr)[:, None] * np.where(wrink[:, None], S_w, 0.0)
-    D = (k * ta + eps)[:, None, None] * C + (k * wr)[:, None, None] * np.where(wrink[:, None, None], D_w, 0.0)
+    W = (k * ta + eps) * W_full + k * wr * W_w
+    S = (k * ta + eps)[:, None] * S_full + (k * wr)[:, None] * S_w
+    D = (k * ta + eps)[:, None, None] * C + (k * wr)[:, None, None] * D_w
     return W, S, D, state
 
 
