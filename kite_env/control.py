@@ -77,6 +77,14 @@ class LineActuator:
         T = np.asarray(line_tension, dtype=float)
         return float((T[1] + T[3]) / max(T[0] + T[2], 1e-9))
 
+    def force_increment(self, line_tension: np.ndarray) -> tuple[float, float]:
+        """The force loop over one controller period: ``(L3, mu)``, the common increment of both steering-line rest
+        lengths [m] (Eq. 19 plus the integral term) and the force ratio of Eq. (18); advances the integral."""
+        cfg = self.cfg
+        mu, err = force_ratio_error(line_tension, cfg.mu_target)
+        self.integral = force_integral(self.integral, float(err), cfg)
+        return -cfg.k3_m * float(err) - cfg.k3i_per_s * self.integral, float(mu)  # Eq. (19), plus the integral
+
     def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray):
         """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
 
@@ -89,10 +97,7 @@ class LineActuator:
         dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
         l = np.asarray(line_length, dtype=float)
         dl = float(l[1] - l[3])  # Delta l = l_B - l_D (Sect. III.A)
-        mu, err = force_ratio_error(line_tension, cfg.mu_target)
-        mu, err = float(mu), float(err)
-        self.integral = force_integral(self.integral, err, cfg)
-        L3 = -cfg.k3_m * err - cfg.k3i_per_s * self.integral  # Eq. (19), plus the integral term
+        L3, mu = self.force_increment(line_tension)
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.config import Config
-from kite_env.dynamics.simulator import FlightSimulator, SimulationError
+from kite_env.control import LineActuator, actuate
+from kite_env.dynamics.simulator import SimulationError, make_simulator
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
 
@@ -31,17 +32,19 @@ from kite_env.wind import WindField
 @dataclass(frozen=True)
 class TurnRate:
     """One open-loop flight: held input ``dl_m`` [m], mean yaw rate [rad/s] in the window (raw, not
-    neutral-subtracted), mean airspeed [m/s], how the flight ended (``"ok"`` or the failure reason) and when [s]."""
+    neutral-subtracted), mean airspeed [m/s], how the flight ended (``"ok"`` or the failure reason) and when [s],
+    and the least tension of the two steering lines in the window [N] (near 0: a line was slack)."""
 
     dl_m: float
     yaw_rate_rad_s: float
     airspeed_mps: float
     end: str
     t_end_s: float
+    steering_line_min_N: float = float("nan")
 
 
 def open_loop_flight(cfg: Config, dl_m: float, t_hold_s: float = 0.5, window_s: tuple[float, float] = (1.0, 2.5),
-                     speed_mps: float | None = None) -> TurnRate:
+                     speed_mps: float | None = None, force_loop: bool = True) -> TurnRate:
     """Fly the kite open loop with ``L_B - L_D = dl_m`` held from ``t_hold_s`` and average the yaw rate over
     ``t_hold_s + window_s``.
 
@@ -56,24 +59,43 @@ def open_loop_flight(cfg: Config, dl_m: float, t_hold_s: float = 0.5, window_s: 
         Averaging window after ``t_hold_s``.
     speed_mps : float, optional [m/s]
         Start speed (default ``cfg.start_speed_mps``).
+    force_loop : bool
+        Run the paper's force controller (Eq. 18-19 with ``control.k3i_per_s``) on the common rest length of both
+        steering lines, as in the paper's flight of Fig. 16, and move the rest lengths through the KCU's motors
+        (:func:`kite_env.control.actuate`). ``False``: both rest lengths held (before stop 39): the kite climbs,
+        mu drifts and a steering line goes slack within the window (at 10 m/s both), so the yaw rate then measures
+        a wing hanging on its power lines (docs/flight_model.md, section 27).
     """
     path = Lemniscate(cfg.trajectory)
-    sim = FlightSimulator(cfg, WindField(cfg.wind))
+    sim = make_simulator(cfg, WindField(cfg.wind))
     rec = sim.reset(path.point(0.0), path.tangent(0.0), speed_mps)
+    act = LineActuator(cfg.control, sim.L_B0, sim.L_D0) if force_loop else None
+    n_control = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
     t0, t1 = t_hold_s + window_s[0], t_hold_s + window_s[1]
     yaw, speed = [], []
+    line_min = float("inf")
     end = "ok"
+    L_B, L_D = sim.L_B0, sim.L_D0
+    k = 0
     try:
         while rec.t < t1 - 1e-9:
             d = dl_m if rec.t >= t_hold_s - 1e-9 else 0.0
-            rec = sim.step(sim.L_B0 + 0.5 * d, sim.L_D0 - 0.5 * d)
+            if act is None:
+                L_B, L_D = sim.L_B0 + 0.5 * d, sim.L_D0 - 0.5 * d
+            elif k % n_control == 0:
+                L3, _ = act.force_increment(rec.line_tension)
+                L_B, L_D = actuate(sim.L_B0 + 0.5 * d + L3, sim.L_D0 - 0.5 * d + L3, L_B, L_D, cfg.control)
+            rec = sim.step(L_B, L_D)
+            k += 1
             if rec.t >= t0 - 1e-9:
                 yaw.append(float(rec.omega @ rec.R_wk[:, 2]))
                 speed.append(float(np.linalg.norm(rec.v_kite - rec.v_wind)))
+                line_min = min(line_min, float(rec.line_tension[1]), float(rec.line_tension[3]))
     except SimulationError as exc:
         end = exc.reason
     return TurnRate(dl_m=float(dl_m), yaw_rate_rad_s=float(np.mean(yaw)) if yaw else float("nan"),
-                    airspeed_mps=float(np.mean(speed)) if speed else float("nan"), end=end, t_end_s=float(sim.t))
+                    airspeed_mps=float(np.mean(speed)) if speed else float("nan"), end=end, t_end_s=float(sim.t),
+                    steering_line_min_N=line_min if speed else float("nan"))
 
 
 def turn_rate_table(cfg: Config, dls_m=(-0.2, 0.1, 0.2, 0.3), wind_speeds_mps=(5.0,), **kwargs) -> list[dict]:
@@ -87,7 +109,8 @@ def turn_rate_table(cfg: Config, dls_m=(-0.2, 0.1, 0.2, 0.3), wind_speeds_mps=(5
             r = open_loop_flight(c, dl, **kwargs)
             d = r.yaw_rate_rad_s - neutral.yaw_rate_rad_s
             rows.append({"wind_mps": float(w), "dl_m": float(dl), "yaw_rate_rad_s": d, "per_m": d / dl,
-                         "airspeed_mps": r.airspeed_mps, "end": r.end if r.end == "ok" else f"{r.end} at {r.t_end_s:.2f} s"})
+                         "airspeed_mps": r.airspeed_mps,
+                         "steering_line_min_N": r.steering_line_min_N, "end": r.end if r.end == "ok" else f"{r.end} at {r.t_end_s:.2f} s"})
     return rows
 
 

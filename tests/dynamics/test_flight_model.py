@@ -39,6 +39,26 @@ def test_held_steering_input_turns_the_kite_the_right_way_and_faster_with_more_i
     assert rate[-0.2] == pytest.approx(-rate[0.2], rel=0.3)  # nearly mirror-symmetric
 
 
+def test_the_open_loop_flight_flies_the_configured_wing_with_the_force_loop_holding_the_lines(monkeypatch):
+    """kite_env.turn_rate.open_loop_flight (stop 39): it builds the simulator of the configuration (the wing with
+    inertia by default; before, always the quasi-static wing), and the force controller on the common rest length
+    keeps both steering lines loaded through the window; with both rest lengths held (force_loop=False) the climbing
+    kite's released line goes slack."""
+    from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
+    import kite_env.turn_rate as tr
+
+    built = []
+    real = tr.make_simulator
+    monkeypatch.setattr(tr, "make_simulator", lambda *a, **k: built.append(real(*a, **k)) or built[-1])
+    cfg = load_config(None, [])
+    held = open_loop_flight(cfg, 0.2)
+    free = open_loop_flight(cfg, 0.2, force_loop=False)
+    assert all(isinstance(s, DynamicFlightSimulator) for s in built) and len(built) == 2
+    assert held.end == free.end == "ok"
+    assert held.steering_line_min_N > 100.0  # [N] (measured 180)
+    assert free.steering_line_min_N < 1.0
+
+
 def test_open_loop_flight_reports_the_window_means():
     """A short open-loop flight: its end ("ok"), a finite mean yaw rate and the airspeed of a flying kite."""
     r = open_loop_flight(load_config(None, []), 0.3, t_hold_s=0.1, window_s=(0.1, 0.3))

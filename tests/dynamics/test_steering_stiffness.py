@@ -85,11 +85,12 @@ def test_the_script_prints_both_steering_points_at_a_flight_state_and_refuses_ba
         assert len(err) == 1 and err[0].startswith("steering_stiffness:")
 
 
-def _open_loop_rate(k_line):
-    """Neutral-subtracted open-loop yaw rate per metre of a held 0.2 m input [rad/s per m] (kite_env.turn_rate)."""
+def _open_loop_rate(k_line, dynamic=True):
+    """Neutral-subtracted open-loop yaw rate per metre of a held 0.2 m input [rad/s per m] (kite_env.turn_rate: the
+    force loop on the common rest length), with the wing with inertia (default) or the quasi-static wing."""
     from kite_env.turn_rate import turn_rate_table
 
-    cfg = load_config(None, [f"dynamics.line_stiffness_N_per_m={k_line}"])
+    cfg = load_config(None, [f"dynamics.line_stiffness_N_per_m={k_line}", f"structure.dynamic={str(dynamic).lower()}"])
     (row,) = turn_rate_table(cfg, dls_m=(0.2,), window_s=(0.5, 1.5))
     assert row["end"] == "ok"
     return row["per_m"]
@@ -102,8 +103,9 @@ def open_loop_rate():
 
 def test_the_open_loop_turn_rate_grows_as_the_share_of_the_input_that_moves_the_wing(loaded, open_loop_rate):
     """Three times stiffer bridle lines (an experiment, not the model): the held input's yaw rate grows by the ratio
-    of the shares ``k_line / (k_line + k_wing)`` (measured x1.74 against x1.85 from the wind tunnel's stiffness at B):
-    the turn rate follows the motion of the steering point, which the wing's stiffness there limits."""
+    of the shares ``k_line / (k_line + k_wing)`` (the wing with inertia: measured x1.67, 1.71 to 2.86 rad/s per m,
+    against x1.85 from the wind tunnel's stiffness at B; the quasi-static wing x1.67 too): the turn rate follows the
+    motion of the steering point, which the wing's stiffness there limits."""
     k_wing = loaded[3][0].coupled_N_per_m
     rate = {K_LINE: open_loop_rate, 3 * K_LINE: _open_loop_rate(3 * K_LINE)}
     share = {k: k / (k + k_wing) for k in rate}
@@ -112,15 +114,19 @@ def test_the_open_loop_turn_rate_grows_as_the_share_of_the_input_that_moves_the_
     assert rate[3 * K_LINE] / rate[K_LINE] > 1.5
 
 
-def test_a_quasi_steady_lateral_balance_predicts_the_open_loop_turn_rate(open_loop_rate):
+def test_a_quasi_steady_lateral_balance_predicts_the_open_loop_turn_rate_of_the_quasi_static_wing(open_loop_rate):
     """The static wing's steering, sideslip and yaw-rate derivatives (25 m/s, kite angle 8 deg), with its side force
-    and yaw moment both zero in the steady turn, predict the open-loop yaw rate per input (measured 1.14 against
-    1.19 rad/s per m); the yaw moment against the yaw-rate damping alone would predict about five times as much, of
-    the other sign: the kite turns towards its side force, the sideslip's weathervane moment sets the rate."""
+    and yaw moment both zero in the steady turn, predict the open-loop yaw rate per input of the quasi-static wing
+    (measured 1.14 against 1.12 rad/s per m); the yaw moment against the yaw-rate damping alone would predict about
+    five times as much, of the other sign: the kite turns towards its side force, the sideslip's weathervane moment
+    sets the rate. The wing with inertia turns faster (1.71: its nodal and added mass are not in this massless
+    balance; docs/flight_model.md, section 27)."""
     from kite_env.turn_rate import lateral_balance
 
     lb = lateral_balance(load_config(None, []), 25.0, np.deg2rad(8.0))
-    assert lb.rate_per_input_m == pytest.approx(open_loop_rate, rel=0.25)
+    quasi_static = _open_loop_rate(K_LINE, dynamic=False)
+    assert lb.rate_per_input_m == pytest.approx(quasi_static, rel=0.25)
+    assert open_loop_rate > 1.3 * quasi_static
     assert lb.damping_only_per_input_m * lb.rate_per_input_m < 0.0
     assert abs(lb.damping_only_per_input_m) > 3.0 * abs(lb.rate_per_input_m)
     d = lb.derivatives
