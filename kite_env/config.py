@@ -102,6 +102,13 @@ class StructureConfig:
     # "full": all of it (0.1 cm; 1.78 iterations: the part within a section is what a kept factorisation contracts
     # worst) (docs/flight_model.md, section 24)
     carry_residual: str = "sections"
+    # the added mass's force: "nodal_acceleration" = M_a times the nodes' acceleration (the default), which in a
+    # steady turn pulls each section with its added mass times the turn's centripetal acceleration, as if the air
+    # turned with the wing; "normal_velocity_rate" = Theodorsen's non-circulatory load (NACA Report 496): the mass
+    # blocks plus -m_a (n' . v_rel) n at the 3/4-chord point, so that a steady turn leaves only the pitch-damping
+    # couple. With it the wing turns faster per input but its 3.9 Hz yaw/twist oscillation grows fourfold in the
+    # baseline flight (docs/flight_model.md, section 27): an option until what damps that mode is known
+    added_mass_force: str = "nodal_acceleration"
 
 
 @dataclass(frozen=True)
@@ -351,6 +358,7 @@ _CHOICES = {
     "control.actuator_axes": ("steer_depower", "per_line"),
     "structure.membrane_forces": ("energy_consistent", "averaged"),
     "structure.carry_residual": ("sections", "full", "none"),
+    "structure.added_mass_force": ("nodal_acceleration", "normal_velocity_rate"),
     "structure.tube_curvature": ("element_energy", "max_end"),
     "aero.negative_alpha": ("bounded", "breukels"),
     "aero.rotation_point": tuple(ROTATION_POINTS),

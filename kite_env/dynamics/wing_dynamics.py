@@ -19,7 +19,9 @@ the wing has mass and moves:
   unit span (Newman, *Marine Hydrodynamics*, MIT Press 1977, Sect. 4.13, table of added masses), with
   the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
   on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
-  added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length.
+  added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length. Its
+  force is ``M_a a`` by default; ``structure.added_mass_force = "normal_velocity_rate"`` adds the part of
+  Theodorsen's non-circulatory load that it misses (:meth:`WingDynamics.normal_rate_force`).
 * **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
   inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
   damping of each section's deviation from it, rotation and deformation together, through the section damping of
@@ -151,6 +153,9 @@ class _StepLoad:
         self.n_tangent = 0
         self.loads = self.collapsed = None
         self.f_phys = self.f_eff = None
+        # the added mass's normal-rate force (WingDynamics.normal_rate_force) at each iterate: (normals at the step
+        # start, the nodes' added-mass shares), or None
+        self.normal_rate = None
         self.line = None
         # the canopy's membrane forces of the step start (energy-consistent membrane forces, dyn.membrane_forces)
         self.f_m0 = dyn.membrane_force(dyn.state.x) if dyn.energy_consistent_membrane else None
@@ -284,6 +289,8 @@ class _StepLoad:
         f6[dyn.bridle, :3] -= T[:, None] * e
         f6[dyn.bridle, :3] += drag
         f6[:, :3] += dyn.m_node[:, None] * self.g_K[None, :]
+        if self.normal_rate is not None:
+            f6[:, :3] += dyn.normal_rate_force(self.normal_rate, st.x, v, self.v_wind)
         self.f_phys = f.copy()
         p = dyn.alpha
         a_m = (1.0 - p.alpha_m) * a + p.alpha_m * dyn.a
@@ -519,7 +526,7 @@ class WingDynamics:
         return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.solver.asm.nnz)
 
     # ------------------------------------------------------------------ pieces
-    def section_weights(self, x_sec: np.ndarray) -> np.ndarray:
+    def section_weights(self, x_sec: np.ndarray, point: str | None = None) -> np.ndarray:
         """Weights (n_sec, m) of the section nodes' velocities in the velocity of each section's rotation point
         (``aero.rotation_point``): the section's velocity field fitted, by least squares, as a linear function of
         the chordwise coordinate to all its nodes, evaluated at the 3/4-chord point (or at the LE node for
@@ -527,12 +534,14 @@ class WingDynamics:
         trailing edge) enters with its share of the fit, not with the whole interpolation weight. Taken from the
         chord line of the LE and TE nodes alone, the TE node's velocity weighs 0.7, and the TE node is driven by its
         own share of the section's lift change: a flutter of the trailing-edge nodes at 20-80 Hz growing at 26 1/s
-        (linearised wing at the start of the baseline flight; docs/flight_model.md, section 12)."""
+        (linearised wing at the start of the baseline flight; docs/flight_model.md, section 12). ``point``
+        overrides ``aero.rotation_point``. As weights of a force on the section (``f_j = W_j F``) they place its
+        resultant at that point, and its power is ``F . v_p``."""
         d = self.wing.mesh.section_tube_d
         e = x_sec[:, -1] - x_sec[:, 0]
         cn = np.linalg.norm(e, axis=1)
         s = np.einsum("ijk,ik->ij", x_sec - x_sec[:, :1], e) / cn[:, None]  # (n_sec, m) along the chord [m]
-        if self.wing.cfg.aero.rotation_point == "three_quarter_chord":
+        if (point or self.wing.cfg.aero.rotation_point) == "three_quarter_chord":
             s_p = 0.75 * (cn + 0.5 * d) - 0.5 * d
         else:
             s_p = np.zeros_like(cn)
@@ -568,6 +577,15 @@ class WingDynamics:
         c = self.tip_rods.conn
         return self.tip_rods.internal(st.x[c], st.Rn[c], tangent=True)[1]
 
+    def _section_frames(self, x: np.ndarray):
+        """The sections' geometry (frames ``e_x``, ``e_z``, ...) at the nodal positions ``x`` (n_nodes, 3)."""
+        mesh = self.wing.mesh
+        x_sec = x[mesh.sections]
+        if self.compiled:  # the same frames from the compiled section kernel (its loads unused)
+            return section_loads_fields(x_sec, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
+                                        _UNIT_X, 1.0)[11]
+        return section_geometry(x_sec, mesh.section_tube_d)
+
     def update_mass(self, x: np.ndarray | None = None) -> None:
         """Nodal mass blocks (n_nodes, 3, 3) [kg] at the shape ``x`` (n_nodes, 3) [m] (default: the current one):
         structural mass plus the sections' added mass along their normals (held over a step). A step takes them at
@@ -576,19 +594,18 @@ class WingDynamics:
         wing, mesh = self.wing, self.wing.mesh
         M = self.m_node[:, None, None] * np.eye(3)[None]
         f = wing.cfg.structure.added_mass_factor
+        self.added = None
         if f > 0.0:
-            x_sec = (self.state.x if x is None else x)[mesh.sections]
-            if self.compiled:  # the same frames from the compiled section kernel (its loads unused)
-                geom = section_loads_fields(x_sec, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
-                                            _UNIT_X, 1.0)[11]
-            else:
-                geom = section_geometry(x_sec, mesh.section_tube_d)
+            x = self.state.x if x is None else x
+            x_sec = x[mesh.sections]
+            geom = self._section_frames(x)
             m_a = added_mass(mesh, geom, wing.cfg.aero.rho_kg_m3, f, wing.aspect_ratio)
             seg = np.linalg.norm(np.diff(x_sec, axis=1), axis=2)
             trib = np.zeros(mesh.sections.shape)
             trib[:, :-1] += 0.5 * seg
             trib[:, 1:] += 0.5 * seg
             share = m_a[:, None] * trib / trib.sum(axis=1, keepdims=True)  # (n_sec, m) [kg]
+            self.added = (share, geom.e_z.copy())
             nn = geom.e_z[:, :, None] * geom.e_z[:, None, :]
             add = (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3)
             if self._sections_partition:  # (each node in one section: no repeated index)
@@ -596,6 +613,34 @@ class WingDynamics:
             else:
                 np.add.at(M, mesh.sections.ravel(), add)
         self.M_blocks = M
+
+    def normal_rate_force(self, held, x: np.ndarray, v: np.ndarray, v_wind: np.ndarray) -> np.ndarray:
+        """The part of Theodorsen's non-circulatory load that the mass blocks ``m_a n n^T`` miss
+        (``structure.added_mass_force = "normal_velocity_rate"``), at the iterate ``x``, ``v`` (n_nodes, 3) [N].
+
+        Theodorsen (1935, NACA Report 496) gives a plate's non-circulatory lift as ``pi rho b^2 (h'' + U alpha' -
+        b a alpha'')``: the plunge and pitch accelerations act through the air's added mass at the plate's own
+        acceleration (the mass blocks, by chordwise tributary length), and ``U alpha'``, the rate at which the plate
+        turns its normal against the flow, acts at the three-quarter-chord point (its moment about the mid-chord is
+        ``-pi rho b^3 U alpha' / 2``, a pitch damping). Here ``U alpha'`` is ``n' . v_rel`` for each section, with the
+        normal's rate over the step from its start to the iterate and the air-relative velocity of the 3/4-chord
+        point; the force ``-m_a (n' . v_rel) n`` is put on the section's nodes with the weights that place it at
+        the 3/4-chord point (:meth:`section_weights`). In a steady turn or pull-up the section's normal velocity does
+        not change: the two parts cancel in force (the mass blocks alone would pull each section with ``m_a`` times
+        the turn's centripetal acceleration, as if the air turned with the wing) and leave the pitch-damping couple.
+        ``held``: the normals at the step's start (n_sec, 3), the sections' added masses (n_sec, m) [kg] and the
+        step [s]."""
+        n0, share, dt = held
+        mesh = self.wing.mesh
+        x_sec = x[mesh.sections]
+        n1 = self._section_frames(x).e_z
+        n_dot = (n1 - n0) / dt  # (n_sec, 3)
+        W = self.section_weights(x_sec, "three_quarter_chord")  # (n_sec, m)
+        v_rel = np.einsum("sj,sjk->sk", W, v[mesh.sections]) - np.asarray(v_wind, float)[None, :]
+        F = -(share.sum(axis=1) * np.einsum("sk,sk->s", n_dot, v_rel))[:, None] * n1  # (n_sec, 3)
+        out = np.zeros((len(v), 3))
+        np.add.at(out, mesh.sections.ravel(), (W[:, :, None] * F[:, None, :]).reshape(-1, 3))
+        return out
 
     # ------------------------------------------------------------------ state
     def start(self, state: NodalState, v_nodes: np.ndarray, r_kcu, v_kcu, rest, g_K, v_wind) -> None:
@@ -662,6 +707,8 @@ class WingDynamics:
         start = self._predict(dt)
         self.update_mass(start.x)
         load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=start)
+        if self.wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.added is not None:
+            load.normal_rate = (self._section_frames(self.state.x).e_z, self.added[0], dt)
         history: list[dict] = []
         res = None
         for attempt in range(2):

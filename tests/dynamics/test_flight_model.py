@@ -63,3 +63,19 @@ def test_open_loop_flight_reports_the_window_means():
     """A short open-loop flight: its end ("ok"), a finite mean yaw rate and the airspeed of a flying kite."""
     r = open_loop_flight(load_config(None, []), 0.3, t_hold_s=0.1, window_s=(0.1, 0.3))
     assert r.end == "ok" and np.isfinite(r.yaw_rate_rad_s) and r.airspeed_mps > 10.0
+
+
+def test_the_turn_rate_script_prints_a_row_per_input_and_refuses_bad_input(load_script, capsys):
+    """``scripts/turn_rate.py --dl=0.1 --wind 5``: one row, the wing with inertia turning at 1.7-1.8 rad/s per m with
+    its steering lines loaded (the force loop on); a zero or unreadable input or a bad key: exit 2, one line."""
+    mod = load_script("turn_rate")
+    assert mod.main(["--dl=0.1", "--wind", "5"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "line min [N]" in out[0] and len(out) == 2
+    wind, dl, _, per_m, airspeed, line_min, end = out[1].split()
+    assert (float(wind), float(dl), end) == (5.0, 0.1, "ok")
+    assert 1.4 < float(per_m) < 2.2 and float(airspeed) > 20.0 and float(line_min) > 100.0
+    for bad in (["--dl", "0"], ["--dl", "x"], ["--set", "structure.added_mass_force=wrong"]):
+        assert mod.main(bad) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("turn_rate:")

@@ -805,3 +805,41 @@ def test_at_10_mps_the_kite_flies_on_the_winch_from_its_wind_scaled_start():
     assert np.max(s["tether_force"][late]) < 20e3 and s["tether_length"][-1] > s["tether_length"][0] + 5.0
     slow = fly(load_config(overrides=base + ["sim.initial_speed_mps=22"]), duration_s=0.36)
     assert slow.series["tip_distance"].min() < 1.0
+
+
+def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
+    """A rigid wing turning at 1 rad/s on a 30 m circle in still air (about 30 m/s): each section's normal velocity
+    relative to the air does not change, so Theodorsen's non-circulatory force on it vanishes
+    (structure.added_mass_force = normal_velocity_rate: the mass blocks' ``M_a a`` and
+    :meth:`WingDynamics.normal_rate_force` cancel on every section to the step's first order, leaving the pitch-damping
+    couple of the force at the 3/4-chord point). ``M_a a`` alone (nodal_acceleration) pulls the wing with the added
+    mass times the turn's centripetal acceleration (about 220 N, 7 kg of its 20 kg)."""
+    base = Config()
+    cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure,
+                                                                    added_mass_force="normal_velocity_rate"))
+    wing = nominal_wing(cfg.kite.name, cfg)
+    d = WingDynamics(wing)
+    x0 = wing.unloaded_state()
+    w = np.array([0.0, 0.0, -1.0])  # yaw about -z_k: the wing flies towards -x_k
+    c = np.array([0.0, 30.0, 0.0])  # centre of the turn [m]
+    dt = 1e-3
+    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    Rot = np.eye(3) + np.sin(dt) * W + (1.0 - np.cos(dt)) * W @ W  # (|w| = 1)
+    x1 = c + (x0.x - c) @ Rot.T
+    d.state = NodalState(x0.x.copy(), x0.Rn.copy())
+    d.v = (x0.x - c) @ W.T  # w x (x - c)
+    d.a = d.v @ W.T  # w x (w x (x - c))
+    assert np.abs(d.v[:, 0]).mean() == pytest.approx(30.0, rel=0.05)
+    d.update_mass(x1)
+    n0 = d._section_frames(x0.x).e_z
+    f = d.normal_rate_force((n0, d.added[0], dt), x1, (x1 - c) @ W.T, np.zeros(3))
+    a1 = ((x1 - c) @ W.T) @ W.T
+    M_a = d.M_blocks - d.m_node[:, None, None] * np.eye(3)[None]
+    inertial = -np.einsum("nij,nj->ni", M_a, a1)  # the force of the mass blocks alone
+    sec = wing.mesh.sections
+    assert d._sections_partition  # (each node in one section: the sections' resultants below are theirs alone)
+    per_section = np.linalg.norm(inertial[sec].sum(axis=1), axis=1)
+    assert np.linalg.norm(inertial.sum(axis=0)) > 150.0  # [N] (220 N along the turn's radius)
+    assert np.linalg.norm((inertial + f)[sec].sum(axis=1), axis=1).max() < 1e-2 * per_section.max()
+    assert np.linalg.norm((inertial + f).sum(axis=0)) < 2.0
+    assert base.structure.added_mass_force == "nodal_acceleration"  # off by default (the mass blocks alone)
