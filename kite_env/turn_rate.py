@@ -265,3 +265,66 @@ def lateral_balance(cfg: Config, airspeed_mps: float, alpha_rad: float, delta_m:
                      "N_r": float(N_r), "Y_r": float(Y_r)},
         share=float(share), beta_per_m=float(beta), rate_per_point_m=float(rate),
         rate_per_input_m=float(rate * per_input), damping_only_per_input_m=float(-N_d / N_r * per_input))
+
+
+# ------------------------------------------------------------------ the wing's yaw mode on its bridle
+@dataclass(frozen=True)
+class YawResponse:
+    """The free yaw response of :func:`tethered_wing_yaw_response`: times ``t`` [s], the yaw angle ``yaw`` [rad] of
+    the line through the LE tips A and C in the ``x_k``-``y_k`` plane, and the Newton iterations of each step."""
+
+    t: np.ndarray
+    yaw: np.ndarray
+    newton: np.ndarray
+
+    def amplitude(self, t0: float, t1: float) -> float:
+        """Largest deviation of the yaw from its mean over the last third [rad] within ``t0 <= t < t1``."""
+        y = self.yaw - self.yaw[-len(self.yaw) // 3:].mean()
+        m = (self.t >= t0) & (self.t < t1)
+        return float(np.abs(y[m]).max())
+
+    def frequency_hz(self, f_min: float = 1.0) -> float:
+        """The yaw's dominant frequency above ``f_min`` [Hz] (Hann-windowed spectrum)."""
+        y = self.yaw - self.yaw.mean()
+        f = np.fft.rfftfreq(len(y), self.t[1] - self.t[0])
+        P = np.abs(np.fft.rfft(y * np.hanning(len(y))))
+        P[f < f_min] = 0.0
+        return float(f[np.argmax(P)])
+
+
+def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: float = np.deg2rad(8.0),
+                               yaw_rate_rad_s: float = 0.5, duration_s: float = 3.0) -> YawResponse:
+    """The wing with inertia on its four bridle lines from a fixed KCU in a wind tunnel (no gravity, no line drag),
+    kicked with a rigid yaw rate about ``z_k`` through its centre, then free for ``duration_s``.
+
+    The rig isolates the yaw/twist oscillation of the flying wing (3.9 Hz in the baseline flight): from the static
+    equilibrium on lines (``support="lines"``), the lines' rest lengths ``l - F / k_c`` make that equilibrium the
+    dynamic wing's, then :class:`kite_env.dynamics.wing_dynamics.WingDynamics` steps at ``dynamics.dt_s``. The wing
+    held at A-D instead shows no such oscillation: it is a mode of the wing on its lines (docs/flight_model.md,
+    section 27)."""
+    from kite_env.dynamics.wing_dynamics import WingDynamics
+    from kite_env.fsi import FlightState
+    from kite_env.polar import nominal_wing
+
+    cfg = dataclasses.replace(cfg, structure=dataclasses.replace(cfg.structure, dynamic=True),
+                              dynamics=dataclasses.replace(cfg.dynamics, gravity_mps2=0.0, line_cd=0.0))
+    wing = nominal_wing(cfg.kite.name, cfg)
+    flight = FlightState.wind_tunnel(airspeed_mps, alpha_rad)
+    sol = wing.solve(None, flight, support="lines", warm=False)
+    kcu = wing.kcu_position()
+    x0 = wing.state.x
+    rest = (np.linalg.norm(x0[wing.bridle] - kcu, axis=1)
+            - np.linalg.norm(sol.F_b, axis=1) / cfg.dynamics.line_stiffness_N_per_m)
+    dyn = WingDynamics(wing)
+    v0 = np.cross(np.array([0.0, 0.0, yaw_rate_rad_s])[None, :], x0 - x0.mean(axis=0))
+    dyn.start(wing.state.copy(), v0, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind)
+    dt = cfg.dynamics.dt_s
+    A, C = wing.bridle[0], wing.bridle[2]
+    t, yaw, newton = [], [], []
+    for k in range(int(round(duration_s / dt))):
+        s = dyn.step(dt, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind, flight)
+        e = dyn.state.x[A] - dyn.state.x[C]
+        t.append((k + 1) * dt)
+        yaw.append(float(np.arctan2(e[0], e[1])))
+        newton.append(s.newton_iters)
+    return YawResponse(np.array(t), np.array(yaw), np.array(newton))
