@@ -1,10 +1,11 @@
 """Open-loop steering authority: the yaw rate a held steering input gives, in the full flight model.
 
 The paper (Sect. IV, Fig. 16) calls the steering input and the yaw rate "linearly correlated" in the upper half of
-the figure-eight. Here the relation is measured without a controller: the kite starts at the figure's crossing
-point flying along the path, the steering-line rest lengths are set to ``L_B = L_0 + dL / 2``, ``L_D = L_0 - dL / 2``
-at ``t_hold`` and held; the yaw rate ``omega_k . z_k`` is averaged over a window after the transient, and the same
-flight with ``dL = 0`` is subtracted (gravity and the start turn the kite a little by themselves).
+the figure-eight. Here the relation is measured without the steering controller: the kite (the configured wing)
+starts at the figure's crossing point flying along the path, the steering-line rest lengths are set to ``L_B = L_0 +
+dL / 2 + L3``, ``L_D = L_0 - dL / 2 + L3`` from ``t_hold``, with ``dL`` held and ``L3`` the paper's force loop
+(Eq. 18-19) keeping both lines loaded; the yaw rate ``omega_k . z_k`` is averaged over a window after the transient,
+and the same flight with ``dL = 0`` is subtracted (gravity and the start turn the kite a little by themselves).
 
 ``psi_dot / dL`` [rad/s per m] at a few speeds is the number the model's steering is judged by: about 5 in the
 paper's Fig. 16 (its two axis scales, +-0.3 m against +-1.5 rad/s), about 2.5-5 in TU Delft V3 flight data
@@ -12,7 +13,8 @@ paper's Fig. 16 (its two axis scales, +-0.3 m against +-1.5 rad/s), about 2.5-5 
 
 Why it is what it is, on the static wing: :func:`steering_point_stiffness` (how much of a steering input moves the
 wing, and what holds the steering points) and :func:`lateral_balance` (the steady turn in which the steered wing's
-side force and yaw moment vanish); docs/flight_model.md, section 26.
+side force and yaw moment vanish); docs/flight_model.md, section 26. The wing's yaw/twist mode on its lines:
+:func:`tethered_wing_yaw_response` (section 27).
 """
 
 from __future__ import annotations

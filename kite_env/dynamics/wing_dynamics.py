@@ -154,7 +154,7 @@ class _StepLoad:
         self.loads = self.collapsed = None
         self.f_phys = self.f_eff = None
         # the added mass's normal-rate force (WingDynamics.normal_rate_force) at each iterate: (normals at the step
-        # start, the nodes' added-mass shares), or None
+        # start, the nodes' added-mass shares, the step), or None
         self.normal_rate = None
         self.line = None
         # the canopy's membrane forces of the step start (energy-consistent membrane forces, dyn.membrane_forces)
