@@ -605,7 +605,7 @@ class WingDynamics:
             trib[:, :-1] += 0.5 * seg
             trib[:, 1:] += 0.5 * seg
             share = m_a[:, None] * trib / trib.sum(axis=1, keepdims=True)  # (n_sec, m) [kg]
-            self.added = (share, geom.e_z.copy())
+            self.added = (share, geom.e_z)
             nn = geom.e_z[:, :, None] * geom.e_z[:, None, :]
             add = (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3)
             if self._sections_partition:  # (each node in one section: no repeated index)

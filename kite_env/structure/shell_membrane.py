@@ -133,13 +133,18 @@ def relaxed_svk(Ev: np.ndarray, Y: np.ndarray, nu: np.ndarray, C: np.ndarray, ep
     D_w = Y[:, None, None] * m1[:, :, None] * m1[:, None, :] \
         + (2.0 * YE / gap)[:, None, None] * m12[:, :, None] * m12[:, None, :]
     W_w = 0.5 * YE * E1p
-    wr = wrink.astype(float)
-    ta = taut.astype(float)
+    return (*_blend(eps, taut, wrink, W_full, S_full, C, W_w, S_w, D_w), state)
+
+
+def _blend(eps, taut, wrink, W_full, S_full, C, W_w, S_w, D_w):
+    """Energy, stress and tangent of the relaxed laws from their taut (``W_full``, ``S_full``, ``C``) and wrinkled
+    (``W_w``, ``S_w``, ``D_w``) values: taut elements take the full law, wrinkled ones the wrinkled law, every element
+    keeps the fraction ``eps`` of the full law (slack elements only that)."""
     a = 1.0 - eps
-    W = (a * ta + eps) * W_full + a * wr * W_w
-    S = (a * ta + eps)[:, None] * S_full + (a * wr)[:, None] * S_w
-    D = (a * ta + eps)[:, None, None] * C + (a * wr)[:, None, None] * D_w
-    return W, S, D, state
+    cT = a * taut.astype(float) + eps
+    cW = a * wrink.astype(float)
+    return (cT * W_full + cW * W_w, cT[:, None] * S_full + cW[:, None] * S_w,
+            cT[:, None, None] * C + cW[:, None, None] * D_w)
 
 
 def fabric_matrix(Y: np.ndarray, nu: np.ndarray, shear_ratio: float, angle: np.ndarray) -> np.ndarray:
@@ -225,13 +230,7 @@ def relaxed_general(Ev: np.ndarray, C: np.ndarray, eps: float):
     S_w = S_full + w[:, None] * a
     D_w = C - a[:, :, None] * a[:, None, :] / d[:, None, None] - curv[:, None, None] * g[:, :, None] * g[:, None, :]
     W_w = W_full + 0.5 * w * s
-    wr = wrink.astype(float)
-    ta = taut.astype(float)
-    k = 1.0 - eps
-    W = (k * ta + eps) * W_full + k * wr * W_w
-    S = (k * ta + eps)[:, None] * S_full + (k * wr)[:, None] * S_w
-    D = (k * ta + eps)[:, None, None] * C + (k * wr)[:, None, None] * D_w
-    return W, S, D, state
+    return (*_blend(eps, taut, wrink, W_full, S_full, C, W_w, S_w, D_w), state)
 
 
 #: Newton in the wrinkle angle of :func:`relaxed_general`: at most this many iterations, steps within this bound [rad],
