@@ -14,7 +14,7 @@ paper's Fig. 16 (its two axis scales, +-0.3 m against +-1.5 rad/s), about 2.5-5 
 Why it is what it is, on the static wing: :func:`steering_point_stiffness` (how much of a steering input moves the
 wing, and what holds the steering points) and :func:`lateral_balance` (the steady turn in which the steered wing's
 side force and yaw moment vanish); docs/flight_model.md, section 26. The wing's yaw/twist mode on its lines:
-:func:`tethered_wing_yaw_response` (section 27).
+:func:`tethered_wing_yaw_response` and its linearisation :func:`tethered_wing_modes` (sections 27-28).
 """
 
 from __future__ import annotations
@@ -285,6 +285,13 @@ class YawResponse:
         m = (self.t >= t0) & (self.t < t1)
         return float(np.abs(y[m]).max())
 
+    def growth_rate_per_s(self, t0: float = 0.5, t1: float = 3.0, window_s: float = 0.5) -> float:
+        """Exponential growth rate [1/s] of the yaw's oscillation (negative where it decays): the slope of the log
+        of :meth:`amplitude` over successive windows of ``window_s`` from ``t0`` to ``t1``."""
+        starts = np.arange(t0, t1 - 1e-9, window_s)
+        amp = np.array([self.amplitude(a, a + window_s) for a in starts])
+        return float(np.polyfit(starts + 0.5 * window_s, np.log(amp), 1)[0])
+
     def frequency_hz(self, f_min: float = 1.0) -> float:
         """The yaw's dominant frequency above ``f_min`` [Hz] (Hann-windowed spectrum)."""
         y = self.yaw - self.yaw.mean()
@@ -294,16 +301,14 @@ class YawResponse:
         return float(f[np.argmax(P)])
 
 
-def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: float = np.deg2rad(8.0),
-                               yaw_rate_rad_s: float = 0.5, duration_s: float = 3.0) -> YawResponse:
-    """The wing with inertia on its four bridle lines from a fixed KCU in a wind tunnel (no gravity, no line drag),
-    kicked with a rigid yaw rate about ``z_k`` through its centre, then free for ``duration_s``.
+def _tethered_wing_rig(cfg: Config, airspeed_mps: float, alpha_rad: float, settle_s: float):
+    """The rig of :func:`tethered_wing_yaw_response` at rest on its lines: ``(dyn, kcu, rest, flight)``.
 
-    The rig isolates the yaw/twist oscillation of the flying wing (3.9 Hz in the baseline flight): from the static
-    equilibrium on lines (``support="lines"``), the lines' rest lengths ``l - F / k_c`` make that equilibrium the
-    dynamic wing's, then :class:`kite_env.dynamics.wing_dynamics.WingDynamics` steps at ``dynamics.dt_s``. The wing
-    held at A-D instead shows no such oscillation: it is a mode of the wing on its lines (docs/flight_model.md,
-    section 27)."""
+    The static solve on lines (``support="lines"``) holds the ``x_k`` and ``z_k`` of A-D and frees only their
+    ``y_k``; its reactions are not along the lines. With rest lengths ``l - |F_b| / k_c`` the free wing is therefore
+    not in equilibrium there: it surges 0.96 m forward (a 0.6 Hz swing on its lines, up to 2.8 m/s) and settles
+    within about 10 s. The wing is released from the static shape at rest and stepped for ``settle_s``, which leaves
+    it moving at about 1e-4 m/s (docs/flight_model.md, section 28)."""
     from kite_env.dynamics.wing_dynamics import WingDynamics
     from kite_env.fsi import FlightState
     from kite_env.polar import nominal_wing
@@ -318,10 +323,28 @@ def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_ra
     rest = (np.linalg.norm(x0[wing.bridle] - kcu, axis=1)
             - np.linalg.norm(sol.F_b, axis=1) / cfg.dynamics.line_stiffness_N_per_m)
     dyn = WingDynamics(wing)
-    v0 = np.cross(np.array([0.0, 0.0, yaw_rate_rad_s])[None, :], x0 - x0.mean(axis=0))
-    dyn.start(wing.state.copy(), v0, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind)
-    dt = cfg.dynamics.dt_s
-    A, C = wing.bridle[0], wing.bridle[2]
+    dyn.start(wing.state.copy(), np.zeros_like(x0), kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind)
+    for _ in range(int(round(settle_s / cfg.dynamics.dt_s))):
+        dyn.step(cfg.dynamics.dt_s, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind, flight)
+    return dyn, kcu, rest, flight
+
+
+def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: float = np.deg2rad(8.0),
+                               yaw_rate_rad_s: float = 0.5, duration_s: float = 3.0,
+                               settle_s: float = 12.0) -> YawResponse:
+    """The wing with inertia on its four bridle lines from a fixed KCU in a wind tunnel (no gravity, no line drag),
+    at rest on them (:func:`_tethered_wing_rig`, after ``settle_s``), kicked with a rigid yaw rate about ``z_k``
+    through its centre, then free for ``duration_s``.
+
+    The rig isolates the yaw/twist oscillation of the flying wing (3.9 Hz in the baseline flight), a mode of the
+    wing on its lines (the wing held at A-D shows none); :func:`tethered_wing_modes` linearises it
+    (docs/flight_model.md, sections 27-28)."""
+    dyn, kcu, rest, flight = _tethered_wing_rig(cfg, airspeed_mps, alpha_rad, settle_s)
+    dt = dyn.wing.cfg.dynamics.dt_s
+    x0 = dyn.state.x
+    v0 = dyn.v + np.cross(np.array([0.0, 0.0, yaw_rate_rad_s])[None, :], x0 - x0.mean(axis=0))
+    dyn.start(dyn.state.copy(), v0, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind)
+    A, C = dyn.bridle[0], dyn.bridle[2]
     t, yaw, newton = [], [], []
     for k in range(int(round(duration_s / dt))):
         s = dyn.step(dt, kcu, np.zeros(3), rest, np.zeros(3), flight.v_wind, flight)
@@ -330,3 +353,126 @@ def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_ra
         yaw.append(float(np.arctan2(e[0], e[1])))
         newton.append(s.newton_iters)
     return YawResponse(np.array(t), np.array(yaw), np.array(newton))
+
+
+@dataclass(frozen=True)
+class WingModes:
+    """The linearised rig's modes (:func:`tethered_wing_modes`), sorted by frequency: eigenvalues ``lam`` [1/s]
+    (those with a positive imaginary part, and the real ones), ``frequency_hz``, ``damping_ratio`` (``-Re / |lam|``,
+    negative where the mode grows), and each mode's rigid-body content: ``rigid`` (the share of its mass-weighted
+    translations that a rigid motion of the wing fits) and ``yaw`` (the fitted rotation about ``z_k`` over the
+    largest nodal translation, 1/m)."""
+
+    lam: np.ndarray
+    frequency_hz: np.ndarray
+    damping_ratio: np.ndarray
+    rigid: np.ndarray
+    yaw: np.ndarray
+
+    def yaw_mode(self, f_min: float = 2.5, f_max: float = 4.5, rigid_min: float = 0.6) -> int:
+        """Index of the least damped mode in ``f_min``-``f_max`` Hz that turns the wing rigidly about ``z_k``
+        (``rigid`` above ``rigid_min`` and ``|yaw|`` above a third of the largest such)."""
+        m = (self.frequency_hz > f_min) & (self.frequency_hz < f_max) & (self.rigid > rigid_min)
+        m &= np.abs(self.yaw) > np.abs(self.yaw[m]).max() / 3.0
+        idx = np.flatnonzero(m)
+        return int(idx[np.argmin(self.damping_ratio[idx])])
+
+
+def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: float = np.deg2rad(8.0),
+                        settle_s: float = 12.0, h_mps: float = 1e-4, rigid_inflow: bool = True) -> WingModes:
+    """The rig of :func:`tethered_wing_yaw_response` linearised at rest on its lines: ``M q'' + D q' + K q = 0`` on
+    the nodes' translations, the rotations condensed statically (the nodes' rotary inertia does not change the
+    rig's response, docs section 27).
+
+    ``K``: the structure's tangent and the step's external stiffness (:meth:`_StepLoad.operators`: the section loads
+    at the held inflow, the bridle lines). ``M``: the nodal mass blocks with the added mass. ``D = -df/dv`` by
+    central differences (``h_mps``) of the step's own force law (:class:`_StepLoad`, built at each velocity state):
+    the section loads see the wing's rigid translation through the inflow (``u_ref``, their force and moment alike),
+    the deviation from it through the section damping, plus the bridle lines' and the structural damping and, with
+    ``structure.added_mass_force = "normal_velocity_rate"``, the normal-rate force with ``n' = (dn/dx) v``.
+    ``rigid_inflow=False`` gives the operators' damping ``C`` instead (the Newton tangent's, which applies the
+    section damping to all of the velocity: the rigid translation's response is then the sections' forces at their
+    3/4-chord points, symmetric part projected onto the positive semi-definite cone, without the moment of Eq. 9)."""
+    from kite_env.dynamics.wing_dynamics import _StepLoad
+
+    dyn, kcu, rest, flight = _tethered_wing_rig(cfg, airspeed_mps, alpha_rad, settle_s)
+    wing = dyn.wing
+    n = len(dyn.state.x)
+    st = dyn.state
+    dt = wing.cfg.dynamics.dt_s
+    asm = wing._mono_solvers["prescribed"].asm
+    zero3 = np.zeros(3)
+    dyn.v = np.zeros((n, 3))
+    dyn.a = np.zeros((n, 3))
+    dyn.w = np.zeros((n, 3))
+    dyn.aw = np.zeros((n, 3))
+    dyn.carry = None
+    dyn.update_mass(st.x)
+
+    def load_at(v):
+        dyn.v = v
+        ld = _StepLoad(dyn, dt, kcu, zero3, rest, zero3, flight.v_wind)
+        ld.x_pred, ld.v_pred = st.x, v  # a = 0 at the iterate st, v the velocities
+        return ld
+
+    ld0 = load_at(np.zeros((n, 3)))
+    ld0.force(st)
+    dyn.rayleigh_held = (ld0.K0, ld0.Kb_at, 0.0, np.eye(3))  # the structure's tangent at rest, for every state below
+    K, C, M = ld0.operators(st)
+    wing._update_tube_stiffness(st)
+    _, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
+    Kfull = asm.matrix(kd + K).toarray()
+    Mfull = asm.matrix(M).toarray()
+    free = np.setdiff1d(np.arange(6 * n), dyn.solver.auto_fixed)
+    is_t = np.zeros(6 * n, bool)
+    is_t[(6 * np.arange(n)[:, None] + np.arange(3)).ravel()] = True
+    t = free[is_t[free]]
+    r = free[~is_t[free]]
+    Kc = Kfull[np.ix_(t, t)] - Kfull[np.ix_(t, r)] @ np.linalg.solve(Kfull[np.ix_(r, r)], Kfull[np.ix_(r, t)])
+    Mt = Mfull[np.ix_(t, t)]
+    nodes, comp = t // 6, t % 6
+    if rigid_inflow:
+        D = np.zeros((t.size, t.size))
+        normal_rate = wing.cfg.structure.added_mass_force == "normal_velocity_rate" and dyn.added is not None
+        n0 = dyn._section_frames(st.x).e_z if normal_rate else None
+        eps = 1e-6  # [s] the normal's rate (dn/dx) v by a forward difference of the shape
+
+        def f(v):
+            ld = load_at(v)
+            out = ld.force(st).reshape(-1, 6)[:, :3].copy()
+            if normal_rate:
+                out += dyn.normal_rate_force((n0, dyn.added[0], eps), st.x + eps * v, v, flight.v_wind)
+            return out
+
+        for j, (i, c) in enumerate(zip(nodes, comp)):
+            dv = np.zeros((n, 3))
+            dv[i, c] = h_mps
+            D[:, j] = -((f(dv) - f(-dv)) / (2.0 * h_mps))[nodes, comp]
+    else:
+        D = asm.matrix(C).toarray()[np.ix_(t, t)]
+    Mi = np.linalg.inv(Mt)
+    N = t.size
+    A = np.block([[np.zeros((N, N)), np.eye(N)], [-Mi @ Kc, -Mi @ D]])
+    lam, V = np.linalg.eig(A)
+    keep = lam.imag >= 0.0
+    lam, V = lam[keep], V[:N, keep]
+    # rigid-body content of each mode's translations (structural masses, as WingDynamics.rigid_velocity)
+    m, x = dyn.m_node, st.x
+    c0 = (m @ x) / m.sum()
+    rr = x - c0
+    B = (m[:, None] * rr).T @ rr
+    J_inv = np.linalg.inv(np.trace(B) * np.eye(3) - B)
+    rigid, yaw = np.zeros(lam.size), np.zeros(lam.size)
+    for k in range(lam.size):
+        q = np.zeros((n, 3), complex)
+        q[nodes, comp] = V[:, k]
+        u = np.real(q * np.exp(-0.5j * np.angle(np.sum(q * q))))  # the phase of largest real part
+        vc = (m @ u) / m.sum()
+        Am = (m[:, None] * rr).T @ u
+        w = J_inv @ np.array([Am[1, 2] - Am[2, 1], Am[2, 0] - Am[0, 2], Am[0, 1] - Am[1, 0]])
+        ur = vc[None, :] + np.cross(w[None, :], rr)
+        rigid[k] = np.sum(m[:, None] * ur ** 2) / np.sum(m[:, None] * u ** 2)
+        yaw[k] = w[2] / np.abs(u).max()
+    order = np.argsort(np.abs(lam.imag))
+    lam, rigid, yaw = lam[order], rigid[order], yaw[order]
+    return WingModes(lam, lam.imag / (2.0 * np.pi), -lam.real / np.abs(lam), rigid, yaw)

@@ -372,8 +372,12 @@ class _StepLoad:
     def operators(self, st: NodalState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pattern data of the linearised external forces at the iterate ``st``: stiffness ``K = -d f_ext / d x``
         (aerodynamic loads at the held inflow, bridle lines), damping ``C = -d f_ext / d v`` (the sections'
-        ``W^T C_i W``, the line dampers) and mass ``M`` (nodal blocks with the added mass). With the structure's
-        tangent ``K_T``, ``M x'' + C x' + (K_T + K) x = 0`` is the wing's linearised motion."""
+        ``W^T C_i W``, the line dampers) and mass ``M`` (nodal blocks with the added mass): the Newton tangent of a
+        step, over which the reference inflow ``u_ref`` is held. They are not the free wing's linearised motion:
+        between steps ``u_ref`` follows the wing's rigid translation, whose loads (forces and the moment of Eq. 9, not
+        projected) replace the section damping's response to it; :func:`kite_env.turn_rate.tethered_wing_modes`
+        linearises that (with ``C`` alone the rig's yaw mode is 2.93 Hz at 15.8 % of critical, with the translation's
+        loads 3.59 Hz at 1.0 %, as the stepped rig; docs/flight_model.md, section 28)."""
         dyn, wing = self.dyn, self.dyn.wing
         mesh = wing.mesh
         asm = wing._mono_solvers["prescribed"].asm
