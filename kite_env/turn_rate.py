@@ -112,7 +112,8 @@ def turn_rate_table(cfg: Config, dls_m=(-0.2, 0.1, 0.2, 0.3), wind_speeds_mps=(5
             d = r.yaw_rate_rad_s - neutral.yaw_rate_rad_s
             rows.append({"wind_mps": float(w), "dl_m": float(dl), "yaw_rate_rad_s": d, "per_m": d / dl,
                          "airspeed_mps": r.airspeed_mps,
-                         "steering_line_min_N": r.steering_line_min_N, "end": r.end if r.end == "ok" else f"{r.end} at {r.t_end_s:.2f} s"})
+                         "steering_line_min_N": r.steering_line_min_N,
+                         "end": r.end if r.end == "ok" else f"{r.end} at {r.t_end_s:.2f} s"})
     return rows
 
 
