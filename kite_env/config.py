@@ -43,6 +43,11 @@ class StructureConfig:
     # isotropic law; below 1 a balanced woven fabric with its threads along the chord (x of frame K) and span
     # (kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/flight_model.md, section 26) [-]
     canopy_shear_ratio: float = 1.0
+    # the canopy membrane's strain: "green_lagrange" (exact for any rotation) or "von_karman", the paper's (Sect.
+    # II.A: "von Karman kinematic description"), whose tensioned canopy has no geometric stiffness against in-plane
+    # motion and which strains an element turned in its plane by theta by cos(theta) - 1
+    # (kite_env.structure.shell_membrane; docs/flight_model.md, section 29)
+    membrane_kinematics: str = "green_lagrange"
     # inflated tubes (LE, struts): Breukels' correlations (physics_facts.md 2); 0.3 bar = V3 flight pressure (4.3)
     tube_pressure_Pa: float = 0.3e5  # gauge pressure [Pa]
     # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public (physics_facts 4.5):
@@ -359,6 +364,7 @@ _CHOICES = {
     "structure.membrane_forces": ("energy_consistent", "averaged"),
     "structure.carry_residual": ("sections", "full", "none"),
     "structure.added_mass_force": ("nodal_acceleration", "normal_velocity_rate"),
+    "structure.membrane_kinematics": ("green_lagrange", "von_karman"),
     "structure.tube_curvature": ("element_energy", "max_end"),
     "aero.negative_alpha": ("bounded", "breukels"),
     "aero.rotation_point": tuple(ROTATION_POINTS),
@@ -484,6 +490,9 @@ def _validate(cfg: Config) -> None:
     if not 0.0 < cfg.structure.canopy_shear_ratio <= 1.0:
         raise ConfigError("config key 'structure.canopy_shear_ratio' must lie in (0, 1] (1: the isotropic canopy), "
                           f"got {cfg.structure.canopy_shear_ratio}")
+    if cfg.structure.membrane_kinematics == "von_karman" and cfg.structure.membrane_forces == "energy_consistent":
+        raise ConfigError("structure.membrane_forces=energy_consistent takes the Green-Lagrange membrane only "
+                          "(structure.membrane_kinematics=green_lagrange)")
     if not -1.0 < cfg.structure.canopy_nu < 0.5:
         raise ConfigError(f"config key 'structure.canopy_nu' must lie in (-1, 0.5), got {cfg.structure.canopy_nu}")
     if cfg.kite.n_sections % 2 == 0 or cfg.kite.n_sections < 7:

@@ -162,7 +162,8 @@ class AeroelasticWing:
             self._tube_props_fold = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube],
                                                          self.beams.L0[self._is_tube], np.deg2rad(s.tube_fold_onset_deg))
         self.shells = ShellSet(mesh.shells, mesh.nodes, s.canopy_E_Pa, s.canopy_nu, s.canopy_thickness_m,
-                               wrinkling=s.wrinkling, shear_ratio=s.canopy_shear_ratio)
+                               wrinkling=s.wrinkling, shear_ratio=s.canopy_shear_ratio,
+                               kinematics=s.membrane_kinematics)
         self.assembler = Assembler(mesh.n_nodes, [self.beams, self.shells])
         self.solver = StaticSolver(self.assembler)
         self.lines = BridleLines(mesh.bridle)

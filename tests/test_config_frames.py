@@ -49,6 +49,12 @@ def test_overrides_and_errors(tmp_path):
     for bad in ("180", "-5"):
         with pytest.raises(ConfigError, match="'structure.tube_fold_onset_deg' must lie in"):
             load_config(overrides=[f"structure.tube_fold_onset_deg={bad}"])
+    assert load_config(overrides=["structure.membrane_kinematics=von_karman"]).structure.membrane_kinematics \
+        == "von_karman"
+    with pytest.raises(ConfigError, match="membrane_kinematics"):
+        load_config(overrides=["structure.membrane_kinematics=foppl"])
+    with pytest.raises(ConfigError, match="green_lagrange"):
+        load_config(overrides=["structure.membrane_kinematics=von_karman", "structure.membrane_forces=energy_consistent"])
 
 
 def test_kite_frame_orthonormal_right_handed_and_definition():

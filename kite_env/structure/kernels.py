@@ -713,7 +713,8 @@ def _wrinkled_general(c00, c01, c02, c11, c12, c22, S0, S1, S2):
 
 
 @njit(**_JIT)
-def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending, f_out, K_out, U_out, want_K=True):
+def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending, f_out, K_out, U_out, want_K=True,
+                   vk=False):
     """Flat shell triangles (relaxed SVK membrane + co-rotational DKT + drilling), as ``ShellSet.internal``.
 
     Parameters
@@ -728,9 +729,12 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
     f_out : (n, 18), K_out : (n, 18, 18), U_out : (n,) float   outputs (overwritten).
     want_K : bool   compute the tangent; False: only ``f_out`` and ``U_out`` are written (same values), ``K_out`` is
                     left untouched (for the residual-only assemblies of the modified Newton iteration).
+    vk : bool       von Karman membrane kinematics in the reference frames ``R0`` (``shell_membrane``); False:
+                    Green-Lagrange.
     """
     n = x_e.shape[0]
     F, S, D = np.empty((3, 2)), np.empty(3), np.empty((3, 3))
+    Fb = np.empty((3, 2))
     B, DB, fm, Km = np.empty((3, 9)), np.empty((3, 9)), np.empty(9), np.empty((9, 9))
     av, bv, nv, r1, r2, r3 = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     M, br1, br2, ar2 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -745,10 +749,25 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
         for i in range(3):
             for II in range(2):
                 F[i, II] = x_e[e, 0, i] * G[e, 0, II] + x_e[e, 1, i] * G[e, 1, II] + x_e[e, 2, i] * G[e, 2, II]
-        c00 = F[0, 0] * F[0, 0] + F[1, 0] * F[1, 0] + F[2, 0] * F[2, 0]
-        c11 = F[0, 1] * F[0, 1] + F[1, 1] * F[1, 1] + F[2, 1] * F[2, 1]
-        c01 = F[0, 0] * F[0, 1] + F[1, 0] * F[1, 1] + F[2, 0] * F[2, 1]
-        Ev0, Ev1, Ev2 = 0.5 * (c00 - 1.0), 0.5 * (c11 - 1.0), c01
+        if vk:  # von Karman: the gradient's rows in the reference frame [e1, e2, n0] (shell_membrane)
+            h00 = R0[e, 0, 0] * F[0, 0] + R0[e, 1, 0] * F[1, 0] + R0[e, 2, 0] * F[2, 0]
+            h01 = R0[e, 0, 0] * F[0, 1] + R0[e, 1, 0] * F[1, 1] + R0[e, 2, 0] * F[2, 1]
+            h10 = R0[e, 0, 1] * F[0, 0] + R0[e, 1, 1] * F[1, 0] + R0[e, 2, 1] * F[2, 0]
+            h11 = R0[e, 0, 1] * F[0, 1] + R0[e, 1, 1] * F[1, 1] + R0[e, 2, 1] * F[2, 1]
+            w0 = R0[e, 0, 2] * F[0, 0] + R0[e, 1, 2] * F[1, 0] + R0[e, 2, 2] * F[2, 0]
+            w1 = R0[e, 0, 2] * F[0, 1] + R0[e, 1, 2] * F[1, 1] + R0[e, 2, 2] * F[2, 1]
+            Ev0, Ev1, Ev2 = h00 - 1.0 + 0.5 * w0 * w0, h11 - 1.0 + 0.5 * w1 * w1, h01 + h10 + w0 * w1
+            for i in range(3):
+                Fb[i, 0] = R0[e, i, 0] + R0[e, i, 2] * w0
+                Fb[i, 1] = R0[e, i, 1] + R0[e, i, 2] * w1
+        else:
+            c00 = F[0, 0] * F[0, 0] + F[1, 0] * F[1, 0] + F[2, 0] * F[2, 0]
+            c11 = F[0, 1] * F[0, 1] + F[1, 1] * F[1, 1] + F[2, 1] * F[2, 1]
+            c01 = F[0, 0] * F[0, 1] + F[1, 0] * F[1, 1] + F[2, 0] * F[2, 1]
+            Ev0, Ev1, Ev2 = 0.5 * (c00 - 1.0), 0.5 * (c11 - 1.0), c01
+            for i in range(3):
+                Fb[i, 0] = F[i, 0]
+                Fb[i, 1] = F[i, 1]
         # ---- relaxed SVK law (shell_membrane.relaxed_svk)
         Sf0 = C[e, 0, 0] * Ev0 + C[e, 0, 1] * Ev1 + C[e, 0, 2] * Ev2
         Sf1 = C[e, 1, 0] * Ev0 + C[e, 1, 1] * Ev1 + C[e, 1, 2] * Ev2
@@ -812,12 +831,12 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
             for i in range(3):
                 for j in range(3):
                     D[i, j] = cT * C[e, i, j] + cW * (Ye * mw1[i] * mw1[j] + g2 * mw12[i] * mw12[j])
-        # ---- B = dE_v/dx (3, 9), node-major x;  f = A0 h S^T B;  K = A0 h (B^T D B + (G S G^T) (x) I_3)
+        # ---- B = dE_v/dx (3, 9), node-major x (of Fb);  f = A0 h S^T B;  K = A0 h (B^T D B + (G S G^T) (x) I_3)
         for a in range(3):
             for i in range(3):
-                B[0, 3 * a + i] = G[e, a, 0] * F[i, 0]
-                B[1, 3 * a + i] = G[e, a, 1] * F[i, 1]
-                B[2, 3 * a + i] = G[e, a, 0] * F[i, 1] + G[e, a, 1] * F[i, 0]
+                B[0, 3 * a + i] = G[e, a, 0] * Fb[i, 0]
+                B[1, 3 * a + i] = G[e, a, 1] * Fb[i, 1]
+                B[2, 3 * a + i] = G[e, a, 0] * Fb[i, 1] + G[e, a, 1] * Fb[i, 0]
         ah = A0h[e]
         for k in range(9):
             fm[k] = ah * (S[0] * B[0, k] + S[1] * B[1, k] + S[2] * B[2, k])
@@ -836,8 +855,13 @@ def shell_internal(x_e, R_e, R0, G, A0h, Y, nu, C, K_l, eps, wrinkling, bending,
                 for b in range(3):
                     gsg = G[e, a, 0] * (S[0] * G[e, b, 0] + S[2] * G[e, b, 1]) \
                         + G[e, a, 1] * (S[2] * G[e, b, 0] + S[1] * G[e, b, 1])
-                    for i in range(3):
-                        Km[3 * a + i, 3 * b + i] += gsg
+                    if vk:  # the prestress's geometric stiffness on the out-of-plane motion only
+                        for i in range(3):
+                            for j in range(3):
+                                Km[3 * a + i, 3 * b + j] += gsg * R0[e, i, 2] * R0[e, j, 2]
+                    else:
+                        for i in range(3):
+                            Km[3 * a + i, 3 * b + i] += gsg
             for k in range(9):
                 for ll in range(9):
                     Km[k, ll] *= ah

@@ -84,12 +84,16 @@ class ShellSet:
         or the vectorised NumPy reference (same result to round-off); ``"auto"`` resolves with
         :func:`kite_env.structure.kernels.resolve_backend` (numba when importable).  :meth:`energy` and
         :meth:`stresses` always use NumPy.
+    kinematics : {"green_lagrange", "von_karman"}
+        The membrane's strain: Green-Lagrange (exact for any rotation), or von Karman's moderate-rotation strain in
+        each element's reference frame, the paper's (Sect. II.A), whose tensioned elements have no geometric
+        stiffness against in-plane motion (:mod:`.shell_membrane`). The bending part is the same.
     """
 
     n_en = 3  # nodes per element
 
     def __init__(self, conn, X0, E, nu, h, wrinkling=True, eps_slack=1e-3, drill_factor=1e-6, bending=True,
-                 shear_ratio=1.0, warp=(1.0, 0.0, 0.0), backend="auto"):
+                 shear_ratio=1.0, warp=(1.0, 0.0, 0.0), backend="auto", kinematics="green_lagrange"):
         from . import kernels  # imports numba (once per process)
 
         self.backend = kernels.resolve_backend(backend)
@@ -102,6 +106,9 @@ class ShellSet:
             raise ValueError("ShellSet: need E > 0, h > 0 and -1 < nu < 0.5")
         if not 0.0 <= eps_slack < 1.0:
             raise ValueError("ShellSet: eps_slack must be in [0, 1)")
+        if kinematics not in ("green_lagrange", "von_karman"):
+            raise ValueError(f"ShellSet: kinematics must be 'green_lagrange' or 'von_karman', got {kinematics!r}")
+        self.von_karman = kinematics == "von_karman"  # the membrane's strain (shell_membrane: von Karman kinematics)
         self.wrinkling = bool(wrinkling)
         self.eps_slack = float(eps_slack)
         self.drill_factor = float(drill_factor)
@@ -147,7 +154,7 @@ class ShellSet:
     # ------------------------------------------------------------------------------------------ evaluation
     def _membrane(self, x_e):
         return membrane_internal(np.asarray(x_e, dtype=float), self.G, self.A0h, self.E, self.nu, self.C,
-                                 self.eps_slack, self.membrane_law)
+                                 self.eps_slack, self.membrane_law, self.R0 if self.von_karman else None)
 
     def energy(self, x_e, R_e) -> np.ndarray:
         """Strain energy of each element, ``(n_e,)`` [J] (membrane + bending + drilling)."""
@@ -194,7 +201,7 @@ class ShellSet:
         f = np.empty((n, 18))
         K = np.empty((n, 18, 18) if tangent else (1, 18, 18))
         shell_internal(x_e, R_e, self.R0, self.G, self.A0h, self.E, self.nu, self.C, self.K_l, self.eps_slack,
-                       self.membrane_law, self.bending, f, K, np.empty(n), bool(tangent))
+                       self.membrane_law, self.bending, f, K, np.empty(n), bool(tangent), self.von_karman)
         return f, (K if tangent else None)
 
     def _internal_numpy(self, x_e, R_e):

@@ -41,6 +41,21 @@ stress-free configuration gets the linear-elastic tangent ``C`` rather than ``ep
 
 Element quantities (``A0`` reference area, ``h`` thickness): energy ``A0 h W_eff``, internal force
 ``f_a = A0 h F S G_a`` and tangent ``K = A0 h (B^T D B + (G S G^T) (x) I_3)`` with ``B = dE_v/dx``.
+
+von Karman kinematics (``structure.membrane_kinematics = "von_karman"``, the paper's, Sect. II.A)
+-------------------------------------------------------------------------------------------------
+In the element's reference frame ``R0 = [e1, e2, n0]`` the displacement gradient ``H = F - [e1, e2]`` has in-plane
+rows ``H_ab = e_a . H_b`` and the out-of-plane row ``w_b = n0 . H_b``. The von Karman strain keeps the out-of-plane
+rotations' quadratic terms only (von Karman's moderate-rotation plate strains; the paper: "a quadratic relation
+between the strains and the displacements", adequate "for the expected degree of deformation")::
+
+    E_ab = (H_ab + H_ba) / 2 + w_a w_b / 2
+
+It is the Green-Lagrange strain less ``sum_c H_ca H_cb / 2`` over the in-plane rows ``c``: an in-plane rotation by
+``theta`` strains the element by ``cos(theta) - 1`` along both axes (none with Green-Lagrange), and a tensioned
+element has no geometric stiffness against in-plane motion: ``K = A0 h (B^T D B + (G S G^T) (x) n0 n0^T)`` with
+``B`` of ``F_vk = [e1, e2] + n0 w^T`` in place of ``F``. Out-of-plane deformation alone (``H_ab = 0``) strains both
+alike.
 """
 
 from __future__ import annotations
@@ -248,7 +263,8 @@ def membrane_law(Ev, Y, nu, C, eps, wrinkling):
     return relaxed_svk(Ev, Y, nu, C, eps, bool(wrinkling))
 
 
-def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C, eps, wrinkling):
+def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C, eps, wrinkling,
+                      R0: np.ndarray | None = None):
     """Membrane energy, internal force and tangent w.r.t. the 9 nodal translations.
 
     Parameters
@@ -256,6 +272,8 @@ def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C,
     x_e : (n, 3, 3) float [m]  current node positions.
     G : (n, 3, 2) float [1/m]  reference shape-function gradients; ``A0h`` (n,) [m^3] reference volume.
     Y, nu, C, eps : material data, see :func:`relaxed_svk`; ``wrinkling`` the law of :func:`membrane_law` (0, 1, 2).
+    R0 : (n, 3, 3) float  the reference element frames ``[e1, e2, n0]`` (columns): von Karman kinematics (module
+        docstring); None: Green-Lagrange.
 
     Returns
     -------
@@ -264,21 +282,28 @@ def membrane_internal(x_e: np.ndarray, G: np.ndarray, A0h: np.ndarray, Y, nu, C,
     """
     n = x_e.shape[0]
     F = np.einsum("nai,naI->niI", x_e, G)
-    CG = np.einsum("niI,niJ->nIJ", F, F)
-    Ev = np.stack([0.5 * (CG[:, 0, 0] - 1.0), 0.5 * (CG[:, 1, 1] - 1.0), CG[:, 0, 1]], axis=-1)
+    if R0 is None:
+        CG = np.einsum("niI,niJ->nIJ", F, F)
+        Ev = np.stack([0.5 * (CG[:, 0, 0] - 1.0), 0.5 * (CG[:, 1, 1] - 1.0), CG[:, 0, 1]], axis=-1)
+        Fb = F  # the strain's derivative dE/dx is that of F
+    else:
+        H = np.einsum("nik,niI->nkI", R0, F)  # (n, 3, 2): rows e1, e2, n0 of the gradient
+        w = H[:, 2, :]
+        Ev = np.stack([H[:, 0, 0] - 1.0 + 0.5 * w[:, 0] ** 2, H[:, 1, 1] - 1.0 + 0.5 * w[:, 1] ** 2,
+                       H[:, 0, 1] + H[:, 1, 0] + w[:, 0] * w[:, 1]], axis=-1)
+        Fb = R0[:, :, :2] + R0[:, :, 2, None] * w[:, None, :]  # [e1, e2] + n0 w^T
     W, S, D, state = membrane_law(Ev, Y, nu, C, eps, wrinkling)
-    # B[:, v, (a, i)] = dE_v / dx_ai
-    B = np.empty((n, 3, 3, 3))
-    B[:, 0] = G[:, :, 0, None] * F[:, None, :, 0]
-    B[:, 1] = G[:, :, 1, None] * F[:, None, :, 1]
-    B[:, 2] = G[:, :, 0, None] * F[:, None, :, 1] + G[:, :, 1, None] * F[:, None, :, 0]
-    B = B.reshape(n, 3, 9)
+    B = _strain_operator(Fb, G)  # B[:, v, (a, i)] = dE_v / dx_ai
     f = A0h[:, None] * np.einsum("nv,nvk->nk", S, B)
     K = np.matmul(np.swapaxes(B, 1, 2), np.matmul(D, B))
     Smat = np.stack([S[:, 0], S[:, 2], S[:, 2], S[:, 1]], axis=-1).reshape(n, 2, 2)
     GSG = np.einsum("naI,nIJ,nbJ->nab", G, Smat, G)
-    for i in range(3):
-        K[:, i::3, i::3] += GSG
+    if R0 is None:
+        for i in range(3):
+            K[:, i::3, i::3] += GSG
+    else:  # only the out-of-plane motion has the prestress's geometric stiffness
+        nn = R0[:, :, 2, None] * R0[:, None, :, 2]
+        K += (GSG[:, :, None, :, None] * nn[:, None, :, None, :]).reshape(n, 9, 9)
     K *= A0h[:, None, None]
     return A0h * W, f, K, {"F": F, "Ev": Ev, "S": S, "state": state}
 

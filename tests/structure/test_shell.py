@@ -266,9 +266,9 @@ def test_pressure_load_resultant():
 
 
 # ---------------------------------------------------------------------------------------------- global problems
-def _hencky(n_r, a=0.5, pa_eh=1e-4, drill_factor=1e-6):
+def _hencky(n_r, a=0.5, pa_eh=1e-4, drill_factor=1e-6, kinematics="green_lagrange"):
     X0, conn = disk_mesh(n_r, a)
-    s = ShellSet(conn, X0, E_CANOPY, NU, H_CANOPY, drill_factor=drill_factor)
+    s = ShellSet(conn, X0, E_CANOPY, NU, H_CANOPY, drill_factor=drill_factor, kinematics=kinematics)
     p = pa_eh * E_CANOPY * H_CANOPY / a
     r = np.linalg.norm(X0[:, :2], axis=1)
     edge = np.flatnonzero(r > a * (1 - 1e-9))
@@ -281,13 +281,16 @@ def _hencky(n_r, a=0.5, pa_eh=1e-4, drill_factor=1e-6):
     return res, s, conn
 
 
-def test_hencky_pressurised_circular_membrane():
+@pytest.mark.parametrize("kinematics", ["green_lagrange", "von_karman"])
+def test_hencky_pressurised_circular_membrane(kinematics):
+    """Hencky's membrane is Foppl's, the von Karman strain of a flat membrane; the Green-Lagrange strain differs from
+    it by the in-plane gradients' squares, of the order of the strain (1e-4 here)."""
     c_w, c_n = hencky_coefficients(NU)
     assert abs(c_w - 0.654) < 1e-3  # Hencky (1915) with Fichter's (1997, NASA TP-3658) coefficient for nu = 0.3
     pa_eh = 1e-4
     errors = []
     for n_r in (3, 6, 12):
-        res, s, conn = _hencky(n_r, pa_eh=pa_eh)
+        res, s, conn = _hencky(n_r, pa_eh=pa_eh, kinematics=kinematics)
         w0 = res.state.x[0, 2] / (0.5 * pa_eh ** (1 / 3))
         errors.append(abs(w0 / c_w - 1.0))
         st = s.stresses(res.state.x[conn])
@@ -461,3 +464,72 @@ def test_discrete_gradient_membrane_force_is_second_order_and_its_tangent_exact(
         m[:, a, i] -= 1e-8
         Kfd[:, :, j] = (dg(x0, p)[0] - dg(x0, m)[0]) / 2e-8
     assert np.max(np.abs(K - Kfd)) < 1e-6 * np.max(np.abs(K))
+
+
+# ---------------------------------------------------------------------------------------------- von Karman membrane
+def _vk_pair(rng, n, Fin, out_of_plane=1e-3, backend="auto"):
+    """Triangles in random planes deformed by the in-plane stretch ``Fin`` (element axes, no rigid rotation) plus
+    small out-of-plane displacements: ``(green_lagrange ShellSet, von_karman ShellSet, x_e, R_e)``."""
+    X = _tilted_triangles(rng, n)
+    conn = np.arange(3 * n).reshape(n, 3)
+    gl = ShellSet(conn, X.reshape(-1, 3), E_CANOPY, NU, 0.002, backend=backend)
+    vk = ShellSet(conn, X.reshape(-1, 3), E_CANOPY, NU, 0.002, backend=backend, kinematics="von_karman")
+    loc = np.einsum("nia,nka->nki", gl.R0[:, :, :2], np.einsum("IJ,nkJ->nkI", Fin, gl.xy))
+    x = X[:, :1] + loc + out_of_plane * rng.normal(size=(n, 3, 1)) * gl.R0[:, None, :, 2]
+    R = expm(0.1 * rng.normal(size=(n, 3, 3)))
+    return gl, vk, x, R
+
+
+@pytest.mark.parametrize("Fin", [[[1.03, 0.01], [0.0, 1.02]], [[1.04, 0.02], [0.0, 0.97]]])
+def test_von_karman_membrane_tangent_is_the_derivative_of_its_force_and_its_force_of_its_energy(Fin):
+    rng = np.random.default_rng(7)
+    _, vk, x, R = _vk_pair(rng, 6, np.array(Fin), out_of_plane=0.01, backend="numba")
+    f, K = vk.internal(x, R)
+    Kfd = fd_tangent(lambda a, b: vk.internal(a, b)[0], x, R)
+    for name, err in _rel_block_err(K, Kfd).items():
+        assert err < 2e-6, (name, err)
+    g = fd_tangent(lambda a, b: np.repeat(vk.energy(a, b)[:, None], 18, axis=1), x, R)[:, 0, :]
+    assert np.allclose(g, f, rtol=1e-6, atol=1e-6 * np.max(np.abs(f)))
+    _, vk_np, x2, R2 = _vk_pair(np.random.default_rng(7), 6, np.array(Fin), out_of_plane=0.01, backend="numpy")
+    assert np.array_equal(x2, x)  # (the same triangles and state through the NumPy reference)
+    f2, K2 = vk_np.internal(x2, R2)
+    assert np.allclose(f2, f, rtol=1e-12, atol=1e-12 * np.max(np.abs(f)))
+    assert np.allclose(K2, K, rtol=1e-12, atol=1e-12 * np.max(np.abs(K)))
+
+
+def test_von_karman_and_green_lagrange_membranes_differ_by_the_in_plane_geometric_stiffness():
+    """Out-of-plane displacement alone strains both alike (the same energy and force); their tangents then differ by
+    exactly the prestress's geometric stiffness on the in-plane motion, ``A0 h (G S G^T) (x) (I - n0 n0^T)``."""
+    rng = np.random.default_rng(8)
+    gl, vk, x, R = _vk_pair(rng, 5, np.eye(2), out_of_plane=0.04)
+    assert np.allclose(vk.energy(x, R), gl.energy(x, R), rtol=1e-12)
+    fg, Kg = gl.internal(x, R)
+    fv, Kv = vk.internal(x, R)
+    assert np.allclose(fv, fg, rtol=1e-10, atol=1e-10 * np.max(np.abs(fg)))
+    S = gl.stresses(x)["S"]
+    assert np.all(S[:, 0] + S[:, 1] > 0.0)  # (a stretched, prestressed state)
+    Smat = np.stack([S[:, 0], S[:, 2], S[:, 2], S[:, 1]], axis=-1).reshape(-1, 2, 2)
+    GSG = np.einsum("naI,nIJ,nbJ->nab", gl.G, Smat, gl.G) * gl.A0h[:, None, None]
+    P = np.eye(3)[None] - gl.R0[:, :, 2, None] * gl.R0[:, None, :, 2]
+    expected = np.einsum("nab,nij->naibj", GSG, P).reshape(-1, 9, 9)
+    d = (Kg - Kv)[:, IDX_T][:, :, IDX_T]
+    assert np.allclose(d, expected, rtol=1e-9, atol=1e-9 * np.max(np.abs(expected)))
+
+
+def test_an_in_plane_rotation_strains_the_von_karman_membrane_by_cos_theta_minus_one():
+    """The approximation's known defect: an element turned in its own plane by ``theta`` is strain-free with
+    Green-Lagrange and compressed by ``1 - cos(theta)`` along both axes with von Karman (plain SVK law, no
+    wrinkling, so that the compression shows as energy: ``W = (1 - cos)^2 (C11 + 2 C12 + C22) / 2``)."""
+    X = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.15, 0.3, 0.0]])
+    R = np.repeat(np.eye(3)[None], 3, axis=0)[None]
+    for theta in (0.05, 0.2):
+        x = (X @ expm(np.array([0.0, 0.0, theta])).T)[None]
+        gl = ShellSet([[0, 1, 2]], X, E_CANOPY, NU, 0.002, wrinkling=False, bending=False)
+        vk = ShellSet([[0, 1, 2]], X, E_CANOPY, NU, 0.002, wrinkling=False, bending=False, kinematics="von_karman")
+        assert gl.energy(x, R)[0] < 1e-12 * vk.energy(x, R)[0]
+        C = vk.C[0]
+        c = np.cos(theta) - 1.0
+        W = 0.5 * c * c * (C[0, 0] + 2.0 * C[0, 1] + C[1, 1])
+        assert np.isclose(vk.energy(x, R)[0], vk.A0h[0] * W, rtol=1e-10)
+    with pytest.raises(ValueError, match="kinematics"):
+        ShellSet([[0, 1, 2]], X, E_CANOPY, NU, 0.002, kinematics="foppl")
