@@ -126,6 +126,21 @@ def yaw_steering_fit(steering_m: np.ndarray, yaw_rate_rad_s: np.ndarray,
     return corr, _num(slope), _num(intercept), n
 
 
+def heading_rate(t: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """``d psi / dt`` (n,) [rad/s] of the heading ``psi`` (n,) [rad] on the tangent plane (unwrapped; second-order
+    central differences, one-sided at the ends; NaN where ``t`` or ``psi`` is not finite or fewer than 2 remain).
+
+    The heading is the paper's yaw angle, the third of its x-y'-z'' Euler angles (Sect. III: "the yaw rotation of the
+    kite [...] describes its heading h on the local tangential plane"); its rate differs from the body rate
+    ``omega_k . z_k`` by the turn of the tangent plane's axes as the kite crosses the sphere."""
+    t, psi = np.asarray(t, dtype=float), np.asarray(psi, dtype=float)
+    out = np.full(t.shape, np.nan)
+    ok = np.isfinite(t) & np.isfinite(psi)
+    if ok.sum() >= 2:
+        out[ok] = np.gradient(np.unwrap(psi[ok]), t[ok])
+    return out
+
+
 def heading_rate_mean(t: np.ndarray, psi: np.ndarray) -> float | None:
     """Mean ``|d psi / dt|`` [rad/s] with ``psi`` unwrapped over the finite samples; None with < 2 samples."""
     t, psi = np.asarray(t, dtype=float), np.asarray(psi, dtype=float)
@@ -227,6 +242,10 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
     m["yaw_rate_steering_corr"] = corr
     m["yaw_rate_steering_slope_deg_s_per_m"] = slope
     m["yaw_rate_steering_samples"] = n_fit
+    # the same fit with the rate of the heading, the paper's yaw angle (Sect. III), for Fig. 16
+    corr, slope, _, _ = yaw_steering_fit(steer, heading_rate(t, s("psi")), upper)
+    m["heading_rate_steering_corr"] = corr
+    m["heading_rate_steering_slope_deg_s_per_m"] = slope
     m["heading_rate_mean_deg_s"] = _deg(heading_rate_mean(t, s("psi")))
 
     # wing deformation (Fig. 18)

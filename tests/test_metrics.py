@@ -11,7 +11,7 @@ import pytest
 
 from kite_env.config import load_config
 from kite_env.flight import FlightLog
-from kite_env.metrics import (MIN_FIT_SAMPLES, compute_metrics, heading_rate_mean, read_timeseries,
+from kite_env.metrics import (MIN_FIT_SAMPLES, compute_metrics, heading_rate, heading_rate_mean, read_timeseries,
                               write_timeseries, yaw_steering_fit)
 
 DT = 0.01  # [s]
@@ -231,6 +231,20 @@ def test_heading_rate_unwraps_across_pi():
     psi = (2.0 * t + np.pi) % (2 * np.pi) - np.pi
     assert heading_rate_mean(t, psi) == pytest.approx(2.0)
     assert heading_rate_mean(t[:1], psi[:1]) is None
+    assert np.allclose(heading_rate(t, psi), 2.0)
+    psi_q = 0.3 * t ** 2  # second-order differences: exact for a quadratic inside, first order at the ends
+    assert np.allclose(heading_rate(t, psi_q)[1:-1], 0.6 * t[1:-1])
+    psi_q[5] = np.nan
+    assert np.isnan(heading_rate(t, psi_q)[5]) and np.isfinite(heading_rate(t, psi_q)[4])
+    assert np.isnan(heading_rate(t[:1], psi[:1])).all()
+
+
+def test_the_heading_rate_against_the_steering_input_is_fitted_like_the_yaw_rate():
+    """Fig. 16's fit with the heading's rate (the paper's yaw angle): here the heading turns at a constant rate while
+    the input varies, so the slope is zero and the correlation undefined."""
+    m = compute_metrics(synthetic_log(), cfg_for())
+    assert m["heading_rate_steering_slope_deg_s_per_m"] == pytest.approx(0.0, abs=1e-6)
+    assert m["heading_rate_steering_corr"] is None
 
 
 def test_write_timeseries_round_trip(tmp_path):

@@ -138,6 +138,9 @@ def summary(metrics: dict) -> str:
                                                      for k in ("min", "mean", "max"))),
         ("yaw rate vs steering: r, slope", f"{_fmt(metrics['yaw_rate_steering_corr'])}, "
                                            f"{_fmt(metrics['yaw_rate_steering_slope_deg_s_per_m'])} deg/s per m"),
+        ("heading rate vs steering: r, slope", f"{_fmt(metrics.get('heading_rate_steering_corr'))}, "
+                                               f"{_fmt(metrics.get('heading_rate_steering_slope_deg_s_per_m'))} "
+                                               "deg/s per m"),
         ("steering input max [m]", _fmt(metrics["steering_input_max_m"])),
         ("steering line slack (< 50 N), share of time", _fmt(metrics.get("steering_line_slack_fraction"))),
         ("Newton iterations (mean)", _fmt(metrics["newton_iters_mean"])),
