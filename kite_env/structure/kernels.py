@@ -55,7 +55,11 @@ except ImportError:  # pragma: no cover - exercised only in environments without
 
 BACKENDS = ("auto", "numba", "numpy")
 ENV_VAR = "KITE_ENV_ELEMENT_BACKEND"
-_JIT = dict(cache=True, fastmath=False, nogil=True)
+# ``error_model="numpy"`` (as the dynamics' kernels): a division by zero (a degenerate triangle, a beam of zero
+# length in a Newton iterate) gives ``inf``/``nan`` as the NumPy reference does, which the solver reports as a
+# non-finite residual (a failed step, made again in halves), instead of raising ``ZeroDivisionError`` out of the
+# flight (seen with the von Karman canopy folding, docs/flight_model.md, section 29)
+_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 # Thresholds of the reference implementations.  Literals, not imports: numba's cache is keyed on this file only,
 # so a changed import would not recompile; tests/structure/test_kernels.py checks that they stay equal.

@@ -357,3 +357,18 @@ def test_set_bending_torsion_is_the_same_per_backend(material_terms):
     for name in ("EI2", "EI3", "GJ", "_k11", "_k12", "_kmat"):
         assert np.array_equal(getattr(bn, name), getattr(bp, name)), name
     assert np.array_equal(bn.EI2[rows], EI) and bn.EI2[0] == 50.0 and bn._kmat[0, 0] == 7.0
+
+
+@pytest.mark.parametrize("kinematics", ["green_lagrange", "von_karman"])
+def test_a_degenerate_triangle_gives_non_finite_forces_in_both_backends_instead_of_raising(kinematics):
+    """A Newton iterate can fold a canopy triangle onto a line. The compiled kernel then divides by zero as the NumPy
+    reference does and returns non-finite forces, which the solver reports as a non-finite residual (a failed step,
+    made again in halves); with numba's Python error model it raised ZeroDivisionError out of the flight."""
+    X = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.15, 0.3, 0.0]])
+    x = np.array([[[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.4, 0.0, 0.0]]])  # on one line: no normal
+    R = np.broadcast_to(np.eye(3), (1, 3, 3, 3)).copy()
+    for backend in ("numba", "numpy"):
+        s = ShellSet([[0, 1, 2]], X, 1.25e9, 0.3, 8e-5, backend=backend, kinematics=kinematics)
+        with np.errstate(all="ignore"):
+            f, _ = s.internal(x, R)
+        assert not np.all(np.isfinite(f)), backend
