@@ -434,7 +434,8 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     nodes, comp = t // 6, t % 6
     if rigid_inflow:
         D = np.zeros((t.size, t.size))
-        normal_rate = wing.cfg.structure.added_mass_force == "normal_velocity_rate" and dyn.added is not None
+        normal_rate = (wing.cfg.structure.added_mass_force == "normal_velocity_rate"
+                       and dyn.section_added_mass is not None)
         n0 = dyn._section_frames(st.x).e_z if normal_rate else None
         eps = 1e-6  # [s] the normal's rate (dn/dx) v by a forward difference of the shape
 
@@ -442,7 +443,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
             ld = load_at(v)
             out = ld.force(st).reshape(-1, 6)[:, :3].copy()
             if normal_rate:
-                out += dyn.normal_rate_force((n0, dyn.added[0], eps), st.x + eps * v, v, flight.v_wind)
+                out += dyn.normal_rate_force((n0, dyn.section_added_mass, eps), st.x + eps * v, v, flight.v_wind)
             return out
 
         for j, (i, c) in enumerate(zip(nodes, comp)):
@@ -457,21 +458,15 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     lam, V = np.linalg.eig(A)
     keep = lam.imag >= 0.0
     lam, V = lam[keep], V[:N, keep]
-    # rigid-body content of each mode's translations (structural masses, as WingDynamics.rigid_velocity)
+    # rigid-body content of each mode's translations: WingDynamics.rigid_velocity's mass-weighted fit (dyn.state is st)
     m, x = dyn.m_node, st.x
-    c0 = (m @ x) / m.sum()
-    rr = x - c0
-    B = (m[:, None] * rr).T @ rr
-    J_inv = np.linalg.inv(np.trace(B) * np.eye(3) - B)
     rigid, yaw = np.zeros(lam.size), np.zeros(lam.size)
     for k in range(lam.size):
         q = np.zeros((n, 3), complex)
         q[nodes, comp] = V[:, k]
         u = np.real(q * np.exp(-0.5j * np.angle(np.sum(q * q))))  # the phase of largest real part
-        vc = (m @ u) / m.sum()
-        Am = (m[:, None] * rr).T @ u
-        w = J_inv @ np.array([Am[1, 2] - Am[2, 1], Am[2, 0] - Am[0, 2], Am[0, 1] - Am[1, 0]])
-        ur = vc[None, :] + np.cross(w[None, :], rr)
+        Vr, w = dyn.rigid_velocity(u)
+        ur = Vr[None, :] + np.cross(w[None, :], x)
         rigid[k] = np.sum(m[:, None] * ur ** 2) / np.sum(m[:, None] * u ** 2)
         yaw[k] = w[2] / np.abs(u).max()
     order = np.argsort(np.abs(lam.imag))

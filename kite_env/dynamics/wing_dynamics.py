@@ -154,7 +154,7 @@ class _StepLoad:
         self.loads = self.collapsed = None
         self.f_phys = self.f_eff = None
         # the added mass's normal-rate force (WingDynamics.normal_rate_force) at each iterate: (normals at the step
-        # start, the nodes' added-mass shares, the step), or None
+        # start, the sections' added masses, the step), or None
         self.normal_rate = None
         self.line = None
         # the canopy's membrane forces of the step start (energy-consistent membrane forces, dyn.membrane_forces)
@@ -598,7 +598,7 @@ class WingDynamics:
         wing, mesh = self.wing, self.wing.mesh
         M = self.m_node[:, None, None] * np.eye(3)[None]
         f = wing.cfg.structure.added_mass_factor
-        self.added = None
+        self.section_added_mass = None  # (n_sec,) [kg], for the normal-rate force
         if f > 0.0:
             x = self.state.x if x is None else x
             x_sec = x[mesh.sections]
@@ -609,7 +609,7 @@ class WingDynamics:
             trib[:, :-1] += 0.5 * seg
             trib[:, 1:] += 0.5 * seg
             share = m_a[:, None] * trib / trib.sum(axis=1, keepdims=True)  # (n_sec, m) [kg]
-            self.added = (share, geom.e_z)
+            self.section_added_mass = m_a
             nn = geom.e_z[:, :, None] * geom.e_z[:, None, :]
             add = (share[:, :, None, None] * nn[:, None]).reshape(-1, 3, 3)
             if self._sections_partition:  # (each node in one section: no repeated index)
@@ -632,16 +632,16 @@ class WingDynamics:
         the 3/4-chord point (:meth:`section_weights`). In a steady turn or pull-up the section's normal velocity does
         not change: the two parts cancel in force (the mass blocks alone would pull each section with ``m_a`` times
         the turn's centripetal acceleration, as if the air turned with the wing) and leave the pitch-damping couple.
-        ``held``: the normals at the step's start (n_sec, 3), the sections' added masses (n_sec, m) [kg] and the
+        ``held``: the normals at the step's start (n_sec, 3), the sections' added masses (n_sec,) [kg] and the
         step [s]."""
-        n0, share, dt = held
+        n0, m_a, dt = held
         mesh = self.wing.mesh
         x_sec = x[mesh.sections]
         n1 = self._section_frames(x).e_z
         n_dot = (n1 - n0) / dt  # (n_sec, 3)
         W = self.section_weights(x_sec, "three_quarter_chord")  # (n_sec, m)
         v_rel = np.einsum("sj,sjk->sk", W, v[mesh.sections]) - np.asarray(v_wind, float)[None, :]
-        F = -(share.sum(axis=1) * np.einsum("sk,sk->s", n_dot, v_rel))[:, None] * n1  # (n_sec, 3)
+        F = -(m_a * np.einsum("sk,sk->s", n_dot, v_rel))[:, None] * n1  # (n_sec, 3)
         out = np.zeros((len(v), 3))
         np.add.at(out, mesh.sections.ravel(), (W[:, :, None] * F[:, None, :]).reshape(-1, 3))
         return out
@@ -711,8 +711,8 @@ class WingDynamics:
         start = self._predict(dt)
         self.update_mass(start.x)
         load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=start)
-        if self.wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.added is not None:
-            load.normal_rate = (self._section_frames(self.state.x).e_z, self.added[0], dt)
+        if self.wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.section_added_mass is not None:
+            load.normal_rate = (self._section_frames(self.state.x).e_z, self.section_added_mass, dt)
         history: list[dict] = []
         res = None
         for attempt in range(2):

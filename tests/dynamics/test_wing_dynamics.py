@@ -832,7 +832,7 @@ def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
     assert np.abs(d.v[:, 0]).mean() == pytest.approx(30.0, rel=0.05)
     d.update_mass(x1)
     n0 = d._section_frames(x0.x).e_z
-    f = d.normal_rate_force((n0, d.added[0], dt), x1, (x1 - c) @ W.T, np.zeros(3))
+    f = d.normal_rate_force((n0, d.section_added_mass, dt), x1, (x1 - c) @ W.T, np.zeros(3))
     a1 = ((x1 - c) @ W.T) @ W.T
     M_a = d.M_blocks - d.m_node[:, None, None] * np.eye(3)[None]
     inertial = -np.einsum("nij,nj->ni", M_a, a1)  # the force of the mass blocks alone
