@@ -44,7 +44,10 @@ import numpy as np
 from kite_env.aero.sections import SectionGeometry
 from kite_env.structure.kernels import njit
 
-_JIT = dict(cache=True, fastmath=False, nogil=True)
+# numba's NumPy error model, as the structure's and the dynamics' kernels: a section of zero chord (its nodes
+# collapsed in a Newton iterate) gives non-finite loads as the NumPy reference does, which the solver reports as a
+# non-finite residual (a failed step, made again in halves), instead of raising ZeroDivisionError out of the flight
+_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 # Thresholds of the reference implementation (literals: see the module docstring; checked by the tests).
 _FLAT_FRACTION = 0.02  # sections._FLAT_FRACTION: e_y blends to the LE tangent below this mean offset / chord

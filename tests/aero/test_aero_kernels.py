@@ -326,3 +326,16 @@ def test_rotation_point_moves_the_rotation_term_along_the_chord():
         np.testing.assert_allclose(q.v_app - le.v_app, np.cross(omega, arm), atol=1e-12)
         assert np.abs(q.alpha - le.alpha).max() > 1e-3  # a yaw rate changes the sections' angles of attack
 
+
+
+def test_a_collapsed_section_gives_non_finite_loads_in_both_backends_instead_of_raising():
+    """A Newton iterate can collapse a section's nodes onto its LE node (zero chord). The compiled kernel then divides
+    by zero as the NumPy reference does and returns non-finite loads, which the solver reports as a non-finite residual
+    (a failed step, made again in halves); with numba's Python error model it raised ZeroDivisionError."""
+    x = X0.copy()
+    x[18] = x[18, 0]
+    for backend in ("numba", "numpy"):
+        with np.errstate(all="ignore"):
+            out = section_loads(x, D, W, np.zeros(3), np.zeros(3), flow(25.0, 8.0), RHO, backend=backend)
+        assert not np.all(np.isfinite(out.nodal_forces[18])), backend
+        assert np.all(np.isfinite(out.nodal_forces[:18])), backend
