@@ -533,3 +533,37 @@ def test_an_in_plane_rotation_strains_the_von_karman_membrane_by_cos_theta_minus
         assert np.isclose(vk.energy(x, R)[0], vk.A0h[0] * W, rtol=1e-10)
     with pytest.raises(ValueError, match="kinematics"):
         ShellSet([[0, 1, 2]], X, E_CANOPY, NU, 0.002, kinematics="foppl")
+
+
+def test_a_tensioned_von_karman_membrane_loses_energy_when_turned_in_its_plane():
+    """With a prestress the defect is a negative stiffness: an element stretched by ``e0`` along both axes and then
+    turned in its plane by ``theta`` keeps its energy with Green-Lagrange; with von Karman its strain falls to
+    ``(1 + e0) cos(theta) - 1`` and it loses energy while ``1 - cos(theta)`` is below about ``2 e0``: for small angles
+    a stiffness ``d2U/dtheta2 = -A0 h (sigma_xx + sigma_yy)`` against turning in its plane (docs section 34)."""
+    X = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.15, 0.3, 0.0]])
+    R = np.repeat(np.eye(3)[None], 3, axis=0)[None]
+    e0 = 1e-3
+    stretch = np.sqrt(1.0 + 2.0 * e0)  # Green-Lagrange strain e0 along both axes
+    for kin in ("green_lagrange", "von_karman"):
+        s = ShellSet([[0, 1, 2]], X, E_CANOPY, NU, H_CANOPY, wrinkling=False, bending=False, kinematics=kin)
+        C = s.C[0]
+        k = C[0, 0] + 2.0 * C[0, 1] + C[1, 1]
+        x_vk0 = X * (1.0 + e0)  # von Karman strain e0 along both axes (linear in the in-plane displacement)
+        x0 = X * stretch if kin == "green_lagrange" else x_vk0
+        U0 = s.energy(x0[None], R)[0]
+        assert np.isclose(U0, s.A0h[0] * 0.5 * e0 * e0 * k, rtol=1e-9)
+        for theta in (0.01, 0.04):
+            U = s.energy((x0 @ expm(np.array([0.0, 0.0, theta])).T)[None], R)[0]
+            if kin == "green_lagrange":
+                assert np.isclose(U, U0, rtol=1e-9)
+            else:
+                c = 1.0 - np.cos(theta)
+                # the turned element's strain: (1 + e0) cos(theta) - 1 = e0 - c (1 + e0) along both axes
+                e = e0 - c * (1.0 + e0)
+                assert np.isclose(U, s.A0h[0] * 0.5 * e * e * k, rtol=1e-9)
+                assert U < U0
+        if kin == "von_karman":  # the small-angle stiffness: minus the area times the trace of the membrane stress
+            th = 1e-4
+            Up = s.energy((x0 @ expm(np.array([0.0, 0.0, th])).T)[None], R)[0]
+            Um = s.energy((x0 @ expm(np.array([0.0, 0.0, -th])).T)[None], R)[0]
+            assert np.isclose((Up - 2.0 * U0 + Um) / th**2, -s.A0h[0] * e0 * k, rtol=2e-3)
