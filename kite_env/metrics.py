@@ -46,6 +46,9 @@ PAPER_VALUES = (
     ("tip_reduction", "tip distance reduction (mean)", 1.0, "m", "Sect. IV, Fig. 18"),
     ("tip_variation_left", "transverse displacement variation, left tip", 0.3, "m", "Sect. IV, Fig. 18-19"),
     ("tip_variation_right", "transverse displacement variation, right tip", 0.3, "m", "Sect. IV, Fig. 18-19"),
+    # the ratio of Fig. 16's two axes (yaw rate +-1.5 rad/s, steering input +-0.3 m), whose curves the text calls
+    # linearly correlated in the upper half; the paper's yaw is its heading on the tangent plane (Sect. III)
+    ("heading_rate_slope", "heading rate per steering input, upper half", 5.0, "rad/s/m", "Sect. IV, Fig. 16 axes"),
 )
 
 
@@ -297,6 +300,8 @@ def paper_comparison(m: dict) -> list[dict]:
         "tip_reduction": m["tip_distance_reduction_mean_m"],
         "tip_variation_left": m["tip_displacement_left_variation_m"],
         "tip_variation_right": m["tip_displacement_right_variation_m"],
+        "heading_rate_slope": (None if m.get("heading_rate_steering_slope_deg_s_per_m") is None
+                               else math.radians(m["heading_rate_steering_slope_deg_s_per_m"])),
     }
     return [{"quantity": q, "model": model[key], "paper": list(p) if isinstance(p, tuple) else p, "unit": unit,
              "source": src} for key, q, p, unit, src in PAPER_VALUES]

@@ -152,7 +152,7 @@ def test_deformation_and_numerics(metrics):
 
 def test_paper_comparison(metrics):
     rows = {r["quantity"]: r for r in metrics["paper_comparison"]}
-    assert len(rows) == 8
+    assert len(rows) == 9
     for r in rows.values():
         assert set(r) == {"quantity", "model", "paper", "unit", "source"}
     force = rows["traction (tether) force range"]
@@ -162,6 +162,10 @@ def test_paper_comparison(metrics):
     assert rows["force ratio mu range"]["paper"] == [0.26, 0.34]
     assert rows["tip distance reduction (mean)"]["model"] == pytest.approx(1.0)
     assert rows["transverse displacement variation, right tip"]["model"] == pytest.approx(0.4)
+    fig16 = rows["heading rate per steering input, upper half"]
+    assert fig16["paper"] == 5.0 and fig16["unit"] == "rad/s/m"
+    slope = metrics["heading_rate_steering_slope_deg_s_per_m"]
+    assert slope is not None and fig16["model"] == pytest.approx(np.deg2rad(slope))
 
 
 def test_json_serialisable_with_nan_and_inf():
