@@ -510,32 +510,34 @@ class AeroelasticWing:
         n_sub = max(1, int(np.ceil(move / self.cfg.fsi.max_bridle_step_m)))
         step = self._monolithic if method == "monolithic" else self._couple
         cold = not (warm and self.state is not None)
-        if cold and self.cfg.aero.cm_regression_ref_over_c < self.CM_CONTINUATION_START:
-            self._cm_ref = self.CM_CONTINUATION_START  # the load ramp with C_M about c/4 (_cm_continuation)
-        # continuation in the tube law: a cold solve of the conservative law (element_energy) follows the load ramp
-        # and the C_M continuation with the larger-end law, whose secant iteration converges there, and makes its
-        # last solve from that equilibrium with the exact tangent of the conservative law. On the secant alone its
-        # C_M continuation stagnated (a few N above the tolerance) and the cold start of tests/dynamics/test_flight.py
-        # failed (docs/flight_model.md, sections 15 and 17). Only the path changes.
-        law_continuation = cold and self.cfg.structure.tube_curvature == "element_energy"
-        if law_continuation:
-            self._tube_law = "max_end"
-        try:
-            if len(ramp) > 1:
-                state = self._cold_ramp(state, q_b, flight, dt, support, ramp[-2], 1.0 / len(ramp), history, step)
-            if cold:
-                state = self._cm_continuation(state, q_b, flight, dt, support, ramp, history, step, method)
-        finally:
-            self._cm_ref = None
-            self._tube_law = None
-        start = state
-        self._exact_tube_tangent = law_continuation
-        try:
-            state, sol = self._attempts(start, q_start, q_b, n_sub, predicted, flight, dt, support, ramp[-1], history,
-                                        step, method)
-        finally:
-            self._damped = False
-            self._exact_tube_tangent = False
+        # a cold solve whose load ramp fails is made again from the unloaded wing with a ramp of twice (then four
+        # times) as many steps: the ramp's intermediate states depend on its steps, and on finer chordwise meshes the
+        # default ramp passes through states without a stable equilibrium nearby (a sideways mode of the mid-wing's
+        # leading edge fed by the loads, docs/flight_model.md, section 31); only the path to the equilibrium changes
+        restarts = self.COLD_RESTARTS if cold else 0
+        tension0 = self.lines.tension.copy()
+        first = None
+        for restart in range(restarts + 1):
+            try:
+                state, sol = self._solve_path(state, q_b, q_start, n_sub, predicted, flight, dt, support, ramp, cold,
+                                              step, method, history)
+                break
+            except WingConvergenceError as exc:
+                first = first or exc
+                if restart == restarts:  # the first failure's message, with the history of every path
+                    first.history = history
+                    raise first from exc if exc is not first else None
+                n = len(ramp) * 2
+                ramp = list(np.arange(1, n + 1) / n)
+                # from the unloaded wing, forgetting what the failed path left in it (reset()); the committed state,
+                # the step's damping and the line tensions it started with kept
+                kept = (self.state, self._sec_prev, self._step_prev, self._C_damp, self._free_flight, self._downwash)
+                self.reset()
+                (self.state, self._sec_prev, self._step_prev, self._C_damp, self._free_flight,
+                 self._downwash) = kept
+                self.lines.tension[:] = tension0
+                state = self.unloaded_state()
+                history.append({"cold_restart": n})
         sol.history = history
         if commit:
             # time stepping (dt given, warm): remember the previous step for the linear predictor
@@ -557,6 +559,46 @@ class AeroelasticWing:
                 sol = self.solve(q_b, free, support=support, warm=True, method=method)
                 change = abs(self._downwash[0] - prev)
         return sol
+
+    #: cold solves whose load ramp fails are made again with a ramp of 2x, then 4x the steps (:meth:`solve`)
+    COLD_RESTARTS = 2
+
+    def _solve_path(self, state, q_b, q_start, n_sub, predicted, flight, dt, support, ramp, cold, step, method,
+                    history):
+        """The continuation of :meth:`solve` from ``state``: the load ramp and the C_M continuation of a cold solve,
+        then the solve at full load with its retries (:meth:`_attempts`). Returns ``(state, solution)``. A failed
+        path leaves no flag set; its history entries stay in ``history`` (the first guess of the line tensions of a
+        monolithic solve on lines is made again: it looks for a converged entry in this path's part of it)."""
+        part: list[dict] = []
+        if cold and self.cfg.aero.cm_regression_ref_over_c < self.CM_CONTINUATION_START:
+            self._cm_ref = self.CM_CONTINUATION_START  # the load ramp with C_M about c/4 (_cm_continuation)
+        # continuation in the tube law: a cold solve of the conservative law (element_energy) follows the load ramp
+        # and the C_M continuation with the larger-end law, whose secant iteration converges there, and makes its
+        # last solve from that equilibrium with the exact tangent of the conservative law. On the secant alone its
+        # C_M continuation stagnated (a few N above the tolerance) and the cold start of tests/dynamics/test_flight.py
+        # failed (docs/flight_model.md, sections 15 and 17). Only the path changes.
+        law_continuation = cold and self.cfg.structure.tube_curvature == "element_energy"
+        if law_continuation:
+            self._tube_law = "max_end"
+        try:
+            try:
+                if len(ramp) > 1:
+                    state = self._cold_ramp(state, q_b, flight, dt, support, ramp[-2], 1.0 / len(ramp), part, step)
+                if cold:
+                    state = self._cm_continuation(state, q_b, flight, dt, support, ramp, part, step, method)
+            finally:
+                self._cm_ref = None
+                self._tube_law = None
+            start = state
+            self._exact_tube_tangent = law_continuation
+            try:
+                return self._attempts(start, q_start, q_b, n_sub, predicted, flight, dt, support, ramp[-1], part,
+                                      step, method)
+            finally:
+                self._damped = False
+                self._exact_tube_tangent = False
+        finally:
+            history.extend(part)
 
     def _attempts(self, start, q_start, q_b, n_sub, predicted, flight, dt, support, scale, history, step, method):
         """The solve of :meth:`solve` with its retries: from the last solution (not the predicted start) with a fresh

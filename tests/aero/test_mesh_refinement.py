@@ -81,3 +81,18 @@ def test_the_script_prints_one_row_per_mesh_and_refuses_bad_input(load_script, c
         assert mod.main(bad) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("mesh_refinement:")
+
+
+def test_a_cold_solve_whose_load_ramp_fails_is_made_again_with_a_finer_ramp():
+    """37 x 8 nodes: the default ramp of 6 steps passes through states without a stable equilibrium nearby and fails;
+    the solve is made again from the unloaded wing with 12 steps, which reach the equilibrium (the same one a wing
+    configured with 12 steps reaches); the default mesh needs no restart."""
+    wing, sol = _solved(37, 8)
+    assert [h["cold_restart"] for h in sol.history if "cold_restart" in h] == [12]
+    cfg = load_config(None, ["kite.n_sections=37", "kite.n_chord=8", "fsi.cold_load_steps=12"])
+    direct = nominal_wing("rhino16", cfg).solve(None, FLIGHT, warm=False)
+    assert not any("cold_restart" in h for h in direct.history)
+    assert np.allclose(sol.F_b, direct.F_b, rtol=0.0, atol=1e-6 * np.abs(direct.F_b).max())
+    assert sol.lift_to_drag < 11.57  # below 37 x 7's (the chordwise trend)
+    _, default = _solved(37, 6)
+    assert not any("cold_restart" in h for h in default.history)
