@@ -515,7 +515,7 @@ class AeroelasticWing:
         # default ramp passes through states without a stable equilibrium nearby (a sideways mode of the mid-wing's
         # leading edge fed by the loads, docs/flight_model.md, section 31); only the path to the equilibrium changes
         restarts = self.COLD_RESTARTS if cold else 0
-        tension0 = self.lines.tension.copy()
+        tension0 = self.lines.tension.copy() if restarts else None
         first = None
         for restart in range(restarts + 1):
             try:
@@ -524,9 +524,9 @@ class AeroelasticWing:
                 break
             except WingConvergenceError as exc:
                 first = first or exc
-                if restart == restarts:  # the first failure's message, with the history of every path
+                if restart == restarts:  # the first failure (its message and cause), with every path's history
                     first.history = history
-                    raise first from exc if exc is not first else None
+                    raise first
                 n = len(ramp) * 2
                 ramp = list(np.arange(1, n + 1) / n)
                 # from the unloaded wing, forgetting what the failed path left in it (reset()); the committed state,

@@ -33,13 +33,14 @@ def _meshes(spec: str) -> list[tuple[int, int]]:
     return out
 
 
-def lift_to_drag_factors(loads, v_ref):
-    """``(wing L/D, sections' L/D, projection)`` of the section loads ``loads`` (:class:`kite_env.aero.loads.
-    SectionLoads`) about the reference apparent velocity ``v_ref`` (3,) [m/s]; the first is the product of the other
-    two. Each section's force splits into its drag ``D_i`` along the reference flow and its lift ``L_i`` across it."""
+def lift_to_drag_factors(section_forces, v_ref):
+    """``(wing L/D, sections' L/D, projection)`` of the nodal aerodynamic forces ``section_forces`` (n_sec, m, 3) [N]
+    (a solution's :attr:`kite_env.fsi.WingSolution.section_forces`) about the reference apparent velocity ``v_ref``
+    (3,) [m/s]; the first is the product of the other two. Each section's force splits into its drag ``D_i`` along
+    the reference flow and its lift ``L_i`` across it."""
     import numpy as np
 
-    F = loads.nodal_forces.sum(axis=1)
+    F = np.asarray(section_forces, dtype=float).sum(axis=1)
     e_d = -np.asarray(v_ref, dtype=float) / np.linalg.norm(v_ref)
     D = F @ e_d
     L = F - np.outer(D, e_d)
@@ -88,10 +89,9 @@ def main(argv=None) -> int:
             failed += 1
             continue
         wall = time.perf_counter() - t0
-        loads = wing._aero(wing.state, flight, None)
-        ld, ld_sec, proj = lift_to_drag_factors(loads, flight.v_kite - flight.v_wind)
+        ld, ld_sec, proj = lift_to_drag_factors(sol.section_forces, flight.v_kite - flight.v_wind)
         rB = steering_point_stiffness(wing, flight, wing.kcu_position(), cfg.dynamics.line_stiffness_N_per_m)[0]
-        mid = np.rad2deg(loads.alpha[ns // 2])
+        mid = np.rad2deg(sol.alpha[ns // 2])
         print(f"{ns:>3}x{nc:<2} {6 * wing.mesh.n_nodes:5d} {np.linalg.norm(sol.aero_force):9.0f} {ld:6.2f} "
               f"{ld_sec:9.2f} {proj:10.3f} {mid:9.2f} {rB.coupled_N_per_m / 1e3:10.2f} {rB.share:6.3f} {wall:9.1f}")
     return 1 if failed == len(meshes) else 0

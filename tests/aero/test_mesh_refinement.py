@@ -28,9 +28,8 @@ def test_the_lift_to_drag_ratio_is_the_sections_own_times_the_arcs_projection(lo
     L/D is that of Breukels' 2-D regression at their angles (17-21 at 7-9 deg), the C-shaped arc keeps about two
     thirds of their lift (measured: 18.1 x 0.654 = 11.86)."""
     mod = load_script("mesh_refinement")
-    wing, sol = _solved(37, 6)
-    loads = wing._aero(wing.state, FLIGHT, None)
-    ld, ld_sec, proj = mod.lift_to_drag_factors(loads, FLIGHT.v_kite - FLIGHT.v_wind)
+    _, sol = _solved(37, 6)
+    ld, ld_sec, proj = mod.lift_to_drag_factors(sol.section_forces, FLIGHT.v_kite - FLIGHT.v_wind)
     assert ld == pytest.approx(sol.lift_to_drag, rel=1e-9)
     assert ld == pytest.approx(ld_sec * proj, rel=1e-12)
     assert 16.0 < ld_sec < 20.0 and 0.6 < proj < 0.7
