@@ -32,6 +32,8 @@ section_lift/_drag    (n, n_sec)  section lift and drag (Eq. 7-8) [N]
 lift, drag            (n,)        wing lift and drag [N]; lift_to_drag = lift / drag
 F_b                   (n, 4, 3)   bridle reactions in K [N]
 tip_distance          (n,)        |A - C| [m]
+bridle_y              (n, 4)      transverse (y_k) coordinate of A, B, C, D in K, the paper's Fig. 18 (its design
+                                  values: meta ``design_bridle_y_m``) [m]
 tip_disp_right/_left  (n,)        inward (towards the symmetry plane) displacement of the tip sections'
                                   centroid in K relative to the unloaded design [m]
 elevation, azimuth    (n,)        of the KCU [rad]
@@ -60,6 +62,7 @@ import numpy as np
 
 from kite_env.config import Config
 from kite_env.dynamics.simulator import FlightSimulator, StepRecord
+from kite_env.frames import kite_frame, to_frame
 from kite_env.trajectory import Lemniscate, azimuth, course_angle, elevation, heading_angle
 
 #: the flight ends as crashed when the KCU comes closer to the ground than this elevation [rad]
@@ -87,6 +90,8 @@ class FlightRecorder:
         self.sim = sim
         mesh = sim.wing.mesh
         self.design = mesh.nodes
+        o, R = kite_frame(*self.design[mesh.bridle])
+        self.design_bridle_y = to_frame(self.design[mesh.bridle] - o, R)[:, 1]  # A-D in the design's own K
         self.tips = (mesh.sections[0], mesh.sections[-1])
         self.rows: dict[str, list] = {}
         self.snapshots = {"initial": rec.wing.nodes.copy(), "design": self.design.copy()}
@@ -116,6 +121,7 @@ class FlightRecorder:
             "section_drag": rec.wing.section_drag, "lift": rec.wing.lift, "drag": rec.wing.drag,
             "lift_to_drag": rec.wing.lift_to_drag, "F_b": rec.wing.F_b,
             "tip_distance": float(np.linalg.norm(r[0] - r[2])),
+            "bridle_y": to_frame(r[:4] - 0.5 * (r[0] + r[2]), R)[:, 1],
             "tip_disp_right": -float(disp_r[1]), "tip_disp_left": float(disp_l[1]),
             "elevation": float(elevation(r[4])), "azimuth": float(azimuth(r[4])),
             "psi": float(heading_angle(r[4], -R[:, 0])), "course": float(course_angle(r[4], rec.v_kite)),
@@ -142,6 +148,7 @@ class FlightRecorder:
             "dt_s": self.cfg.dynamics.dt_s, "control_dt_s": control_dt_s, "L_B0": sim.L_B0, "L_D0": sim.L_D0,
             "pair_stiffness_N_per_m": sim.pair_stiffness.tolist(), "n_sections": int(len(mesh.sections)),
             "design_tip_distance_m": float(np.linalg.norm(design[mesh.bridle[0]] - design[mesh.bridle[2]])),
+            "design_bridle_y_m": self.design_bridle_y.tolist(),
             "warmup_s": self.cfg.sim.warmup_s,
         }
         return FlightLog(series=series, meta=meta, snapshots=dict(self.snapshots))

@@ -44,8 +44,9 @@ PAPER_VALUES = (
     ("speed", "flight speed range", (18.0, 28.0), "m/s", "Sect. IV"),
     ("mu", "force ratio mu range", (0.26, 0.34), "-", "Sect. IV (Eq. 18)"),
     ("tip_reduction", "tip distance reduction (mean)", 1.0, "m", "Sect. IV, Fig. 18"),
-    ("tip_variation_left", "transverse displacement variation, left tip", 0.3, "m", "Sect. IV, Fig. 18-19"),
-    ("tip_variation_right", "transverse displacement variation, right tip", 0.3, "m", "Sect. IV, Fig. 18-19"),
+    # Fig. 18 plots the y_k displacement of the bridle points; a tip's variation is the larger of its two points'
+    ("tip_variation_left", "transverse displacement variation, left tip (C, D)", 0.3, "m", "Sect. IV, Fig. 18-19"),
+    ("tip_variation_right", "transverse displacement variation, right tip (A, B)", 0.3, "m", "Sect. IV, Fig. 18-19"),
     # the ratio of Fig. 16's two axes (yaw rate +-1.5 rad/s, steering input +-0.3 m), whose curves the text calls
     # linearly correlated in the upper half; the paper's yaw is its heading on the tangent plane (Sect. III)
     ("heading_rate_slope", "heading rate per steering input, upper half", 5.0, "rad/s/m", "Sect. IV, Fig. 16 axes"),
@@ -263,6 +264,17 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
     m["tip_displacement_right_mean_m"] = _stat(tr, np.mean)
     m["tip_displacement_left_variation_m"] = _stat(tl, np.ptp)
     m["tip_displacement_right_variation_m"] = _stat(tr, np.ptp)
+    # the paper's Fig. 18: the transverse (y_k) displacement of the bridle points A, B, C, D from the design; a
+    # tip's variation (Sect. IV: "varies in total by 0.3 m") is the larger of its two points' (A, B right; C, D left)
+    var = {}
+    if "bridle_y" in log.series:
+        by = s("bridle_y")
+        for j, name in enumerate("ABCD"):
+            var[name] = _stat(by[:, j] if by.ndim == 2 and len(by) else np.empty(0), np.ptp)
+            m[f"bridle_{name}_y_variation_m"] = var[name]
+    for side, pts in (("right", "AB"), ("left", "CD")):
+        vals = [var[p] for p in pts if var.get(p) is not None]
+        m[f"tip_{side}_bridle_y_variation_m"] = max(vals) if vals else None
 
     # numerics
     m["newton_iters_mean"] = _stat(s("newton_iters"), np.mean)
@@ -298,8 +310,8 @@ def paper_comparison(m: dict) -> list[dict]:
         "speed": pair(m["kite_speed_min_mps"], m["kite_speed_max_mps"]),
         "mu": pair(m["force_ratio_mu_min"], m["force_ratio_mu_max"]),
         "tip_reduction": m["tip_distance_reduction_mean_m"],
-        "tip_variation_left": m["tip_displacement_left_variation_m"],
-        "tip_variation_right": m["tip_displacement_right_variation_m"],
+        "tip_variation_left": m.get("tip_left_bridle_y_variation_m"),
+        "tip_variation_right": m.get("tip_right_bridle_y_variation_m"),
         "heading_rate_slope": (None if m.get("heading_rate_steering_slope_deg_s_per_m") is None
                                else math.radians(m["heading_rate_steering_slope_deg_s_per_m"])),
     }

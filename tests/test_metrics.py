@@ -64,6 +64,9 @@ def synthetic_log(duration=9.0, warmup=WARMUP, rows=None) -> FlightLog:
         "path_distance": pd,
         "tip_distance": DESIGN_TIP - 1.0 + 0.15 * np.sin(ph),
         "tip_disp_left": 0.5 + 0.1 * np.sin(ph), "tip_disp_right": 0.45 - 0.2 * np.sin(ph),
+        # y_k of A, B, C, D (Fig. 18): A and C at half the tip distance, B and D moving by 0.25 and 0.35 m in total
+        "bridle_y": np.stack([0.5 * (DESIGN_TIP - 1.0 + 0.15 * np.sin(ph)), 2.4 + 0.125 * np.sin(ph),
+                              -0.5 * (DESIGN_TIP - 1.0 + 0.15 * np.sin(ph)), -2.4 + 0.175 * np.cos(ph)], axis=1),
         "newton_iters": np.where(np.arange(n) % 2 == 0, 3.0, 5.0),
         "wall_time": np.full(n, 0.012),
         "constraint_drift": np.outer(np.sin(t), [1e-9, -4e-9, 2e-9]),
@@ -73,14 +76,15 @@ def synthetic_log(duration=9.0, warmup=WARMUP, rows=None) -> FlightLog:
         "section_lift": np.ones((n, N_SEC)) * 100.0, "section_drag": np.ones((n, N_SEC)) * 12.0,
     }
     for key in ("tether_force", "speed", "lift_to_drag", "mu", "tip_distance", "tip_disp_left", "tip_disp_right",
-                "path_distance", "newton_iters"):
-        series[key] = np.where(warm, 1e6, series[key])
+                "path_distance", "newton_iters", "bridle_y"):
+        series[key] = np.where(warm.reshape((-1,) + (1,) * (series[key].ndim - 1)), 1e6, series[key])
     series["alpha"][warm] = 3.0
     series["wall_time"][0] = 0.0
     snaps = {"design": np.zeros((12, 3)), "initial": np.ones((12, 3))}
     meta = {"crashed": False, "termination_reason": "completed", "sim_time_s": float(t[-1]),
             "wall_time_s": 2.5 * float(t[-1]), "design_tip_distance_m": DESIGN_TIP, "warmup_s": warmup,
-            "n_sections": N_SEC, "pair_stiffness_N_per_m": [1.0, 2.0]}
+            "n_sections": N_SEC, "pair_stiffness_N_per_m": [1.0, 2.0],
+            "design_bridle_y_m": [DESIGN_TIP / 2, 2.6, -DESIGN_TIP / 2, -2.6]}
     return FlightLog(series=series, meta=meta, snapshots=snaps)
 
 
@@ -144,6 +148,13 @@ def test_deformation_and_numerics(metrics):
     assert metrics["tip_displacement_right_mean_m"] == pytest.approx(0.45, abs=1e-9)
     assert metrics["tip_displacement_left_variation_m"] == pytest.approx(0.2)
     assert metrics["tip_displacement_right_variation_m"] == pytest.approx(0.4)
+    # Fig. 18's bridle points: each point's total variation, a tip's the larger of its two points'
+    assert metrics["bridle_A_y_variation_m"] == pytest.approx(0.15)
+    assert metrics["bridle_C_y_variation_m"] == pytest.approx(0.15)
+    assert metrics["bridle_B_y_variation_m"] == pytest.approx(0.25)
+    assert metrics["bridle_D_y_variation_m"] == pytest.approx(0.35)
+    assert metrics["tip_right_bridle_y_variation_m"] == pytest.approx(0.25)
+    assert metrics["tip_left_bridle_y_variation_m"] == pytest.approx(0.35)
     assert metrics["newton_iters_mean"] == pytest.approx(4.0, abs=1.0 / 801)
     assert metrics["wall_time_per_step_ms_median"] == pytest.approx(12.0)
     t = np.arange(801) * DT + WARMUP
@@ -161,7 +172,8 @@ def test_paper_comparison(metrics):
     assert rows["mid-wing angle of attack (mean)"]["model"] == pytest.approx(7.5)
     assert rows["force ratio mu range"]["paper"] == [0.26, 0.34]
     assert rows["tip distance reduction (mean)"]["model"] == pytest.approx(1.0)
-    assert rows["transverse displacement variation, right tip"]["model"] == pytest.approx(0.4)
+    assert rows["transverse displacement variation, right tip (A, B)"]["model"] == pytest.approx(0.25)
+    assert rows["transverse displacement variation, left tip (C, D)"]["model"] == pytest.approx(0.35)
     fig16 = rows["heading rate per steering input, upper half"]
     assert fig16["paper"] == 5.0 and fig16["unit"] == "rad/s/m"
     slope = metrics["heading_rate_steering_slope_deg_s_per_m"]

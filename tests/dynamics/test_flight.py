@@ -84,6 +84,15 @@ def test_fly_logs_every_step_and_is_deterministic():
         assert len(a.series[key]) == n
         assert np.array_equal(a.series[key], b.series[key], equal_nan=True)
     assert a.series["r"].shape == (n, 5, 3) and a.series["alpha"].shape[1] == a.meta["n_sections"]
+    # Fig. 18's transverse coordinates of A-D in K: y_k runs from C to A through their midpoint, so A and C sit at
+    # +-|A - C| / 2; B and D inside the tips; the design's A at Fig. 3's 5.80 m / 2
+    by, r = a.series["bridle_y"], a.series["r"]
+    half = 0.5 * np.linalg.norm(r[:, 0] - r[:, 2], axis=1)
+    assert by.shape == (n, 4)
+    assert np.allclose(by[:, 0], half, atol=1e-12) and np.allclose(by[:, 2], -half, atol=1e-12)
+    assert np.all((by[:, 1] > 0) & (by[:, 1] < half) & (by[:, 3] < 0) & (by[:, 3] > -half))
+    assert a.meta["design_bridle_y_m"][0] == pytest.approx(2.90, abs=1e-9)
+    assert a.meta["design_bridle_y_m"][2] == pytest.approx(-2.90, abs=1e-9)
     # the kite starts at the crossing point and moves along the path
     assert a.series["path_distance"].max() < np.radians(1.0)
     assert a.series["path_s"][-1] > 0.0
