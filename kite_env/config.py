@@ -85,9 +85,11 @@ class StructureConfig:
     # trailing-edge rotations then had nothing to hold them, docs/flight_model.md, section 18) [-]
     rotary_inertia_factor: float = 1.0
     # structural damping of the wing with inertia: stiffness-proportional (Rayleigh) C = beta K_T on the nodal
-    # translations, beta = 2 zeta / omega_ref: 2 % of critical at 10 Hz, the level of the paper's relative damping
-    # coefficients of the wing (Table 1: 0.015-0.02); 0 = none [s]
-    rayleigh_beta_s: float = 6.4e-4
+    # translations, beta = 2 zeta / omega_ref: 2 % of critical (the level of the paper's relative damping
+    # coefficients of the wing, Table 1: 0.015-0.02) at 4 Hz, the wing's lowest elastic mode in flight (its
+    # yaw/twist mode on the lines, 3.6-3.9 Hz), and more at every higher one (6.4e-4 s, 2 % at 10 Hz, before
+    # stop 42: 0.8 % at that mode; docs/flight_model.md, section 36); 0 = none [s]
+    rayleigh_beta_s: float = 1.6e-3
     # the tangent K_T of that damping is refreshed when it is this old (time from the step end where it was
     # assembled to the current step's end) and held, turned with the step's frame, in between: the damping matrix
     # of the wing's shape at most this long ago. 0 = every step (stops 31-36). Assembling the full tangent at each

@@ -29,8 +29,9 @@ the wing has mass and moves:
   ``aero.rotation_point``; dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` taken from the wing's
   own nodes.
 * **Structural damping**: stiffness-proportional (Rayleigh) ``beta K_T(x_n)`` on the nodal translations, acting on
-  the motion relative to the rigid-body motion, ``beta = structure.rayleigh_beta_s`` (2 % of critical at 10 Hz by
-  default, the level of the relative damping coefficients the paper gives its wing, Table 1). ``K_T`` is the tangent
+  the motion relative to the rigid-body motion, ``beta = structure.rayleigh_beta_s`` (by default 2 % of critical,
+  the level of the relative damping coefficients the paper gives its wing, Table 1, at 4 Hz, the wing's lowest elastic
+  mode in flight, and more above). ``K_T`` is the tangent
   of the wing's shape at most ``structure.rayleigh_tangent_period_s`` (20 ms) before, turned with the frame.
 * **Bridle lines** of Eq. (10) (spring-dampers, pulling only) from A-D to the KCU, whose position at the end of the
   step is given (the staggered partition: the KCU's explicit step first, then the wing's implicit step); line drag
