@@ -709,11 +709,16 @@ class WingDynamics:
         :class:`WingConvergenceError` and leaves the state as it was when Newton fails."""
         wing = self.wing
         fcfg = wing.cfg.fsi
-        start = self._predict(dt)
+        pred = start = self._predict(dt)
         self.update_mass(start.x)
-        load = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=start)
-        if self.wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.section_added_mass is not None:
-            load.normal_rate = (self._section_frames(self.state.x).e_z, self.section_added_mass, dt)
+
+        def step_load() -> _StepLoad:
+            ld = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=pred)
+            if wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.section_added_mass is not None:
+                ld.normal_rate = (self._section_frames(self.state.x).e_z, self.section_added_mass, dt)
+            return ld
+
+        load = step_load()
         history: list[dict] = []
         res = None
         for attempt in range(2):
@@ -729,6 +734,13 @@ class WingDynamics:
                 if attempt == 1:
                     raise WingConvergenceError(f"dynamic wing step failed: {exc}", history) from exc
                 start = self.state.copy()
+                if self.rayleigh_held is not None:
+                    # the structural damping's tangent held from up to rayleigh_tangent_period_s before is the
+                    # shape's of then: in a fast collapse it no longer describes the wing. The retry, and the
+                    # steps in halves after it fails (FlightSimulator.step), assemble it at their own start
+                    # (docs/flight_model.md, section 36)
+                    self.rayleigh_held = None
+                    load = step_load()
         st = res.state
         if res.accepted:
             load.force(st)

@@ -584,6 +584,38 @@ def test_the_rayleigh_tangent_is_held_over_its_period_and_turned_with_the_frame(
     assert np.linalg.norm(fd - T @ du) <= 2e-3 * np.linalg.norm(fd)
 
 
+def test_a_failed_step_retries_with_the_damping_tangent_of_its_own_start(monkeypatch):
+    """The structural damping's tangent is held over ``structure.rayleigh_tangent_period_s`` (the shape's of up to
+    20 ms before). A step whose Newton fails is tried again from the committed state: that retry (and the steps in
+    halves after it) assembles the tangent at its own start instead of taking the held one. (In the 10 m/s
+    collapse on the constant tether the held tangent of the collapsing wing made every retry and half step fail:
+    "wing did not converge" at 5.08 s; with the tangent assembled the kite reaches the ground at 7.88 s, a physical
+    end; docs/flight_model.md, section 36.)"""
+    from kite_env.structure.solver import ConvergenceError
+
+    cfg = Config()
+    sim = make_simulator(cfg, UniformWind())
+    start(sim)
+    for _ in range(2):
+        sim.step(sim.L_B0, sim.L_D0)
+    d = sim.dyn
+    assert d.rayleigh_held is not None and d.rayleigh_held[2] > 0.0  # held from an earlier step
+    solve = d.solver.solve
+    seen = []
+
+    def failing_once(*args, **kwargs):
+        load = kwargs["load"]
+        seen.append(load.K0 is not None)  # the tangent taken from the held one before any force evaluation
+        if len(seen) == 1:
+            raise ConvergenceError("forced", [(0, 1.0, 1.0)])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(d.solver, "solve", failing_once)
+    rec = sim.step(sim.L_B0, sim.L_D0)
+    assert seen == [True, False]  # the first attempt held it, the retry assembled it
+    assert d.rayleigh_held[2] == 0.0 and rec.substeps == 1
+
+
 def test_the_held_rayleigh_tangent_keeps_the_flight_and_its_newton_iterations():
     """The baseline's first 10 s with the structural damping's tangent held over 20 ms (the default) and assembled
     at every step (``rayleigh_tangent_period_s = 0``, stops 31-36): the KCU within a centimetre (0.66 cm), and no
