@@ -266,14 +266,12 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
     m["tip_displacement_right_variation_m"] = _stat(tr, np.ptp)
     # the paper's Fig. 18: the transverse (y_k) displacement of the bridle points A, B, C, D from the design; a
     # tip's variation (Sect. IV: "varies in total by 0.3 m") is the larger of its two points' (A, B right; C, D left)
-    var = {}
-    if "bridle_y" in log.series:
-        by = s("bridle_y")
-        for j, name in enumerate("ABCD"):
-            var[name] = _stat(by[:, j] if by.ndim == 2 and len(by) else np.empty(0), np.ptp)
-            m[f"bridle_{name}_y_variation_m"] = var[name]
+    by = s("bridle_y") if "bridle_y" in log.series else np.empty((0, 4))  # (logs written before stop 42: none)
+    var = {name: _stat(by[:, j], np.ptp) for j, name in enumerate("ABCD")}
+    for name, v in var.items():
+        m[f"bridle_{name}_y_variation_m"] = v
     for side, pts in (("right", "AB"), ("left", "CD")):
-        vals = [var[p] for p in pts if var.get(p) is not None]
+        vals = [var[p] for p in pts if var[p] is not None]
         m[f"tip_{side}_bridle_y_variation_m"] = max(vals) if vals else None
 
     # numerics

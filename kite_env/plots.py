@@ -154,19 +154,13 @@ def make_plots(log: FlightLog, cfg: Config, out_dir: str | Path) -> list[Path]:
         ax.legend(loc="upper right", fontsize=8, ncol=3)
     _save(plt, fig, out / "lift_to_drag.png", written)
 
-    # Fig. 18: the y_k displacements of the bridle points A-D from the design (the tip sections' centroids without)
+    # Fig. 18: the y_k displacements of the bridle points A-D from the design
     fig, axes = _time_axes(plt, 2, "Transverse displacement of the bridle points and tip distance (cf. paper Fig. 18)",
                            warmup, t_end)
-    design_y = log.meta.get("design_bridle_y_m")
-    if "bridle_y" in se and design_y is not None:
-        by = np.asarray(se["bridle_y"])[k] - np.asarray(design_y, dtype=float)
-        for j, name in enumerate("ABCD"):
-            axes[0].plot(ts, by[:, j], lw=0.9, label=name)
-        axes[0].set_ylabel(r"$y_k$ displacement [m]")
-    else:  # a log written before the bridle points were recorded
-        axes[0].plot(ts, np.asarray(se["tip_disp_left"])[k], lw=0.9, label="left tip (inward)")
-        axes[0].plot(ts, np.asarray(se["tip_disp_right"])[k], lw=0.9, label="right tip (inward)")
-        axes[0].set_ylabel("tip displacement [m]")
+    by = np.asarray(se["bridle_y"])[k] - np.asarray(log.meta["design_bridle_y_m"], dtype=float)
+    for j, name in enumerate("ABCD"):
+        axes[0].plot(ts, by[:, j], lw=0.9, label=name)
+    axes[0].set_ylabel(r"$y_k$ displacement [m]")
     axes[1].plot(ts, np.asarray(se["tip_distance"])[k], lw=0.9, color="k", label="tip distance |A - C|")
     design = log.meta.get("design_tip_distance_m")
     if design is not None:
