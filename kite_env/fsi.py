@@ -37,6 +37,7 @@ from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteM
 from kite_env.structure import rotations, tube
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
+from kite_env.structure.hem import HemSet
 from kite_env.structure.kernels import tube_secants
 from kite_env.structure.shell import ShellSet
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
@@ -154,7 +155,16 @@ class AeroelasticWing:
         EI2[te] = np.maximum(EI2[te], s.te_hem_EI_Nm2)
         EI3[te] = np.maximum(EI3[te], s.te_hem_EI_Nm2)
         GJ[te] = np.maximum(GJ[te], s.te_hem_EI_Nm2 / (1.0 + _NU_ROD))
+        # structure.te_hem_element: "rod" takes the hem out of the co-rotational beams (their rows stay, without
+        # stiffness, so that the beams keep the mesh's numbering) into frame-free rods with its axial and bending
+        # stiffness (kite_env.structure.hem; docs/flight_model.md, section 37)
+        self.hem = None
+        if s.te_hem_element == "rod" and np.any(te):
+            self.hem = HemSet(mesh.beams[te], mesh.nodes, np.asarray(mesh.beam_up)[te], EA[te],
+                              0.5 * (EI2[te] + EI3[te]), GJ[te])
+            EA[te] = EI2[te] = EI3[te] = GJ[te] = 0.0
         self.beams = BeamSet(mesh.beams, mesh.nodes, mesh.beam_up, EA, EI2, EI3, GJ)
+        rods = [] if self.hem is None else [self.hem]
         # the conservative law with the fold contact of a kinked tube (structure.tube_fold_onset_deg; the larger-end
         # law and the continuation through it keep Breukels' law alone)
         self._tube_props_fold = self.tube_props
@@ -164,16 +174,17 @@ class AeroelasticWing:
         self.shells = ShellSet(mesh.shells, mesh.nodes, s.canopy_E_Pa, s.canopy_nu, s.canopy_thickness_m,
                                wrinkling=s.wrinkling, shear_ratio=s.canopy_shear_ratio,
                                kinematics=s.membrane_kinematics)
-        self.assembler = Assembler(mesh.n_nodes, [self.beams, self.shells])
+        self.assembler = Assembler(mesh.n_nodes, [self.beams, self.shells, *rods])
         self.solver = StaticSolver(self.assembler)
         self.lines = BridleLines(mesh.bridle)
-        self._lines_solver = StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines]))
+        self._lines_solver = StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, *rods, self.lines]))
         # monolithic Newton on structure + aero loads: the pattern includes the section blocks of the aero load
         # Jacobian; mode "modified" keeps the factorisation across calls (time steps) while it still contracts
         self._mono_solvers = {
-            "prescribed": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells], extra_blocks=mesh.sections),
+            "prescribed": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, *rods],
+                                                 extra_blocks=mesh.sections),
                                        mode="modified", max_iter=self.cfg.fsi.max_newton_iter, contraction=0.5),
-            "lines": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, self.lines],
+            "lines": StaticSolver(Assembler(mesh.n_nodes, [self.beams, self.shells, *rods, self.lines],
                                             extra_blocks=mesh.sections), mode="modified", contraction=0.5,
                                   max_iter=self.cfg.fsi.max_newton_iter),
         }
@@ -320,7 +331,9 @@ class AeroelasticWing:
         u_tube = L0 * (tube.bending_energy_density(self._tube_props_fold, kappa)
                        + tube.torsion_energy_density(self.tube_props, phi)) + 0.5 * b.EA[tb] / L0 * (l[tb] - L0) ** 2
         u_rest = b.energy(xb, Rb)[~tb]
-        return float(u_tube.sum() + u_rest.sum() + self.shells.energy(state.x[m.shells], state.Rn[m.shells]).sum())
+        u_hem = 0.0 if self.hem is None else self.hem.energy(state.x[self.hem.conn], state.Rn[self.hem.conn]).sum()
+        return float(u_tube.sum() + u_rest.sum() + u_hem
+                     + self.shells.energy(state.x[m.shells], state.Rn[m.shells]).sum())
 
     #: points (/chord) the regression CM is stepped through from a cold start (``_cm_continuation``)
     CM_CONTINUATION_START = 0.25

@@ -164,6 +164,10 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     for g, code in zip(STIFFNESS_PARTS[:4], (BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP)):
         sel = m.beam_kind == code
         np.add.at(groups[g], (dof_b[sel][:, :, None], dof_b[sel][:, None, :]), Kb[sel])
+    if wing.hem is not None:  # (the hem as frame-free rods: structure.te_hem_element = "rod")
+        _, Kh = wing.hem.internal(st.x[wing.hem.conn], st.Rn[wing.hem.conn])
+        dof_h = element_dofs(wing.hem.conn)
+        np.add.at(groups[STIFFNESS_PARTS[2]], (dof_h[:, :, None], dof_h[:, None, :]), Kh)
     _, Ks = wing.shells.internal(st.x[m.shells], st.Rn[m.shells])
     dof_s = element_dofs(m.shells)
     np.add.at(groups["canopy"], (dof_s[:, :, None], dof_s[:, None, :]), Ks)

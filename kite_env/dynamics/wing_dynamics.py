@@ -405,6 +405,10 @@ class _StepLoad:
         if self.K0 is not None:
             C += self.beta_K * (self.K0 if self.K0_turn is None else dyn.turned_translations(self.K0, self.K0_turn)) \
                 * dyn.tt_mask
+        if self.normal_rate is not None:
+            K_nr, C_nr = dyn.normal_rate_tangent(self.normal_rate, st.x, v, self.v_wind)
+            K += asm.block_data(K_nr)
+            C += asm.block_data(C_nr)
         return K, C, M
 
 
@@ -646,6 +650,38 @@ class WingDynamics:
         out = np.zeros((len(v), 3))
         np.add.at(out, mesh.sections.ravel(), (W[:, :, None] * F[:, None, :]).reshape(-1, 3))
         return out
+
+    def normal_rate_tangent(self, held, x: np.ndarray, v: np.ndarray, v_wind: np.ndarray):
+        """Section blocks (n_sec, 3 m, 3 m) of ``-d f / d x`` and ``-d f / d v`` of :meth:`normal_rate_force` at the
+        iterate ``x``, ``v`` (node-major within each section, as ``Assembler.block_data`` takes them).
+
+        The force grows with the rate of the section normals over the step, ``(n1 - n0) / dt``: its change with the
+        iterate's positions is of the order ``m_a |v_rel| / (c dt)``, as large as the section damping's ``c_v C``
+        for a section that turns fast against the flow, and larger in a step made in halves. Left out of the
+        Newton tangent, a tumbling mid-wing section's Newton stalled at a residual of 960 N in a step of dt/16 and
+        the flight ended (docs/flight_model.md, section 37). The velocity part is exact (``f_j = W_j F`` with ``F =
+        -m_a (n' . v_rel) n1`` and ``v_rel = sum_k W_k v_k - v_wind``: ``-df_j/dv_k = m_a W_j W_k n1 n'^T``); the
+        position part (the normals' and the weights' change) by central differences of the force, one node of every
+        section at a time (each section's force depends on, and acts on, its own nodes alone)."""
+        n0, m_a, dt = held
+        sec = self.wing.mesh.sections
+        n_sec, m = sec.shape
+        K = np.zeros((n_sec, m, 3, m, 3))
+        if self._sections_partition:  # (a node shared by two sections would be moved in both at once)
+            h = 1e-6
+            for j in range(m):
+                for k in range(3):
+                    xp, xm = x.copy(), x.copy()
+                    xp[sec[:, j], k] += h
+                    xm[sec[:, j], k] -= h
+                    d = self.normal_rate_force(held, xp, v, v_wind) - self.normal_rate_force(held, xm, v, v_wind)
+                    K[:, :, :, j, k] = -d[sec] / (2.0 * h)
+        n1 = self._section_frames(x).e_z
+        n_dot = (n1 - n0) / dt
+        W = self.section_weights(x[sec], "three_quarter_chord")
+        C = (m_a[:, None, None, None, None] * W[:, :, None, None, None] * W[:, None, None, :, None]
+             * n1[:, None, :, None, None] * n_dot[:, None, None, None, :])
+        return K.reshape(n_sec, 3 * m, 3 * m), C.reshape(n_sec, 3 * m, 3 * m)
 
     # ------------------------------------------------------------------ state
     def start(self, state: NodalState, v_nodes: np.ndarray, r_kcu, v_kcu, rest, g_K, v_wind) -> None:

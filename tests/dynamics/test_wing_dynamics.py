@@ -912,6 +912,45 @@ def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
     assert base.structure.added_mass_force == "nodal_acceleration"  # off by default (the mass blocks alone)
 
 
+def test_the_normal_rate_forces_tangent_matches_finite_differences():
+    """The tangent of Theodorsen's normal-rate force (structure.added_mass_force = normal_velocity_rate) in the step's
+    Newton: its blocks ``-d f / d x`` and ``-d f / d v`` against central differences of the force, for a wing whose
+    sections turn fast against the flow (a tumbling canopy: normals turned by up to 30 deg over a 0.3 ms step, 20
+    m/s of relative velocity). Without them, the step that ended seed 338 stalled (docs/flight_model.md, section 37)."""
+    base = Config()
+    cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure,
+                                                                    added_mass_force="normal_velocity_rate"))
+    wing = nominal_wing(cfg.kite.name, cfg)
+    d = WingDynamics(wing)
+    rng = np.random.default_rng(5)
+    x0 = wing.unloaded_state().x
+    x1 = x0 + 0.03 * rng.standard_normal(x0.shape)
+    d.state = NodalState(x1.copy(), wing.unloaded_state().Rn)
+    d.update_mass(x1)
+    dt = 3.125e-4
+    held = (d._section_frames(x0).e_z, d.section_added_mass, dt)
+    v = np.array([-20.0, 0.0, 2.0]) + 3.0 * rng.standard_normal(x1.shape)
+    v_wind = np.array([1.0, 0.5, 0.0])
+    Kb, Cb = d.normal_rate_tangent(held, x1, v, v_wind)
+    sec = wing.mesh.sections
+    n_sec, m = sec.shape
+    h = 1e-6
+    for which, blocks in (("x", Kb), ("v", Cb)):
+        fd = np.zeros((n_sec, m, 3, m, 3))
+        for j in range(m):
+            for k in range(3):
+                p, q = [a.copy() for a in ((x1, x1) if which == "x" else (v, v))]
+                p[sec[:, j], k] += h
+                q[sec[:, j], k] -= h
+                args_p = (p, v) if which == "x" else (x1, p)
+                args_q = (q, v) if which == "x" else (x1, q)
+                df = d.normal_rate_force(held, *args_p, v_wind) - d.normal_rate_force(held, *args_q, v_wind)
+                fd[:, :, :, j, k] = -df[sec] / (2.0 * h)
+        fd = fd.reshape(n_sec, 3 * m, 3 * m)
+        assert np.abs(fd).max() > 10.0  # [N/m, N s/m] (the comparison is not one of zeros)
+        assert np.abs(blocks - fd).max() <= 1e-5 * np.abs(fd).max()
+
+
 def test_the_wing_on_its_lines_carries_the_yaw_twist_mode_which_the_normal_rate_force_undamps():
     """kite_env.turn_rate.tethered_wing_yaw_response: the wing with inertia on its lines from a fixed KCU (30 m/s,
     kite angle 8 deg), at rest on them and kicked with 0.5 rad/s of yaw, oscillates at 3.7 Hz (the baseline flight's
