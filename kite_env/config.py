@@ -71,7 +71,7 @@ class StructureConfig:
     te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
     # the trailing-edge hem's element: "beam" = the co-rotational beam of the tubes (stops before 43), whose element
     # frame and rotation logarithm are singular when a slack canopy turns its trailing-edge nodes by 90-180 deg
-    # against the hem; "rod" = a frame-free rod with the same axial and bending stiffness and no torsion
+    # against the hem; "rod" = a frame-free rod with the same axial, bending and (bounded) torsional stiffness
     # (kite_env.structure.hem; docs/flight_model.md, section 37)
     te_hem_element: str = "beam"
     # the wing with inertia (dynamics/wing_dynamics.py): nodal masses (Table 1's 10 kg, 70 % on the LE tube) and
