@@ -69,11 +69,12 @@ class StructureConfig:
     # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
     te_wire_E_Pa: float = 5.5e8  # [Pa]
     te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
-    # the trailing-edge hem's element: "beam" = the co-rotational beam of the tubes (stops before 43), whose element
-    # frame and rotation logarithm are singular when a slack canopy turns its trailing-edge nodes by 90-180 deg
-    # against the hem; "rod" = a frame-free rod with the same axial, bending and (bounded) torsional stiffness
-    # (kite_env.structure.hem; docs/flight_model.md, section 37)
-    te_hem_element: str = "beam"
+    # the trailing-edge hem's element: "rod" = a frame-free rod with the beam's axial, bending and (bounded)
+    # torsional stiffness (kite_env.structure.hem); "beam" = the co-rotational beam of the tubes (stops before 43),
+    # whose element frame and rotation logarithm are singular when a slack canopy turns its trailing-edge nodes by
+    # 90-180 deg against the hem: its energy jumps there, and the nodes' rotations spin up (docs/flight_model.md,
+    # section 37)
+    te_hem_element: str = "rod"
     # the wing with inertia (dynamics/wing_dynamics.py): nodal masses (Table 1's 10 kg, 70 % on the LE tube) and
     # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines (the default since
     # stop 33, when issue 20's verification held: docs/flight_model.md, sections 12-20); false = the paper's
