@@ -156,8 +156,8 @@ class AeroelasticWing:
         EI3[te] = np.maximum(EI3[te], s.te_hem_EI_Nm2)
         GJ[te] = np.maximum(GJ[te], s.te_hem_EI_Nm2 / (1.0 + _NU_ROD))
         # structure.te_hem_element: "rod" takes the hem out of the co-rotational beams (their rows stay, without
-        # stiffness, so that the beams keep the mesh's numbering) into frame-free rods with its axial and bending
-        # stiffness (kite_env.structure.hem; docs/flight_model.md, section 37)
+        # stiffness, so that the beams keep the mesh's numbering) into frame-free rods with its axial, bending and
+        # torsional stiffness (kite_env.structure.hem; docs/flight_model.md, section 37)
         self.hem = None
         if s.te_hem_element == "rod" and np.any(te):
             self.hem = HemSet(mesh.beams[te], mesh.nodes, np.asarray(mesh.beam_up)[te], EA[te],

@@ -16,12 +16,13 @@ For small end rotations ``phi_i`` of the nodes against the chord, ``1 - c_i = ph
 c1 c2 = (r x a1) . (r x a2) = phi1 . phi2 + O(phi^3)``: the Euler-Bernoulli element's ``EI / L0 (2 phi1^2 + 2 phi1 .
 phi2 + 2 phi2^2)`` (Hermite interpolation, as in the beam element). The energy is smooth at every configuration
 with ``l > 0``, grows monotonically with each end's angle up to pi (``2 (1 - c) >= sin^2``, so the bracket is at least
-``2 |s1|^2 - 2 |s1| |s2| + 2 |s2|^2 >= 0`` with ``|s_i| = sin phi_i``), and its torsion is measured by the nodes' section vectors ``b_i = R_i e2``
-(``e2`` the element's undeformed up vector, as the beam's): ``s = r . (b1 x b2)``, the sine of the twist between
-the nodes, with the energy ``GJ / (2 L0) s^2`` (the beam's ``GJ / (2 L0) (th2x - th1x)^2`` for small twists; it is
-bounded, and so is the negative stiffness beyond a twist of 90 deg, at most its own small-angle stiffness ``GJ /
-L0``, a fraction of a trailing-edge node's rotary inertia ``J / (beta dt^2)`` in a step). Bending is isotropic (the
-hem's ``EI``, both axes).
+``2 |s1|^2 - 2 |s1| |s2| + 2 |s2|^2 >= 0`` with ``|s_i| = sin phi_i``), and its torsion is measured by the nodes'
+section vectors ``b_i = R_i e2`` (``e2`` the element's undeformed up vector, as the beam's): ``s = r . (b1 x b2)``,
+the sine of the twist between the nodes, with the energy ``GJ / (2 L0) s^2`` (the beam's ``GJ / (2 L0) (th2x -
+th1x)^2`` for small twists; it is bounded, and so is the negative stiffness beyond a twist of 90 deg, at most its
+own small-angle stiffness ``GJ / L0``, a fraction of a trailing-edge node's rotary inertia ``J / (beta dt^2)`` in a
+step). Without torsion the wing's static start does not converge. Bending is isotropic (the hem's ``EI``, both
+axes).
 
 Force and tangent (``dd = dx2 - dx1``; a rotational DOF increment is a spatial spin ``dw``, ``R_new = expm(dw)
 R_old``, so ``da_i = dw_i x a_i``)::
