@@ -9,19 +9,22 @@ spin up (docs/flight_model.md, section 37). This element has no frame and no log
 ``r = (x2 - x1) / l`` and each node's hem direction ``a_i = R_i e1`` (``e1`` the undeformed axis, ``R_i`` the nodal
 rotation, identity unloaded), its energy is::
 
-    U = EA / (2 L0) (l - L0)^2 + EI / L0 [4 (1 - c1) + 4 (1 - c2) + 2 (a1 . a2 - c1 c2)] + GJ / (2 L0) s^2
-    c_i = r . a_i
+    U = EA / (2 L0) (l - L0)^2 + EI / L0 [4 (1 - c1) + 4 (1 - c2) + 2 (a1 . a2 - c1 c2)]
+        + GJ / (2 L0) [(1 - b1 . b2)^2 + s^2],    c_i = r . a_i
 
 For small end rotations ``phi_i`` of the nodes against the chord, ``1 - c_i = phi_i^2 / 2 + O(phi^4)`` and ``a1 . a2 -
 c1 c2 = (r x a1) . (r x a2) = phi1 . phi2 + O(phi^3)``: the Euler-Bernoulli element's ``EI / L0 (2 phi1^2 + 2 phi1 .
 phi2 + 2 phi2^2)`` (Hermite interpolation, as in the beam element). The energy is smooth at every configuration
 with ``l > 0``, grows monotonically with each end's angle up to pi (``2 (1 - c) >= sin^2``, so the bracket is at least
 ``2 |s1|^2 - 2 |s1| |s2| + 2 |s2|^2 >= 0`` with ``|s_i| = sin phi_i``), and its torsion is measured by the nodes'
-section vectors ``b_i = R_i e2`` (``e2`` the element's undeformed up vector, as the beam's): ``s = r . (b1 x b2)``,
-the sine of the twist between the nodes, with the energy ``GJ / (2 L0) s^2`` (the beam's ``GJ / (2 L0) (th2x -
-th1x)^2`` for small twists; it is bounded, and so is the negative stiffness beyond a twist of 90 deg, at most its
-own small-angle stiffness ``GJ / L0``, a fraction of a trailing-edge node's rotary inertia ``J / (beta dt^2)`` in a
-step). Without torsion the wing's static start does not converge. Bending is isotropic (the hem's ``EI``, both
+section vectors ``b_i = R_i e2`` (``e2`` the element's undeformed up vector, as the beam's): with ``s = r . (b1 x
+b2)`` and ``c = b1 . b2``, ``(1 - c)^2 + s^2`` is ``2 (1 - cos tau)`` for a twist ``tau`` about the chord (the beam's
+``(th2x - th1x)^2`` for small twists), rises monotonically to a twist of pi and vanishes only where the section
+vectors agree, while a bending of one end against the other enters only at fourth order (``(1 - c)^2 + s^2 = 2 (1 -
+c) - |P (b1 x b2)|^2``). ``s^2`` alone has a second minimum at a twist of pi, where a trailing-edge node flipped by
+half a turn stayed in the 7 m/s flight (stop 43). The torsion's negative stiffness beyond 90 deg is at most its
+small-angle stiffness ``GJ / L0``, a fraction of a trailing-edge node's rotary inertia ``J / (beta dt^2)`` in a
+step. Without torsion the wing's static start does not converge. Bending is isotropic (the hem's ``EI``, both
 axes).
 
 Force and tangent (``dd = dx2 - dx1``; a rotational DOF increment is a spatial spin ``dw``, ``R_new = expm(dw)
@@ -107,7 +110,7 @@ class HemSet:
         a12 = _dot(a1, a2)
         return (0.5 * self.EA / self.L0 * (l - self.L0) ** 2
                 + self.EI / self.L0 * (8.0 - 4.0 * c1 - 4.0 * c2 + 2.0 * (a12 - c1 * c2))
-                + 0.5 * self.GJ / self.L0 * s**2)
+                + 0.5 * self.GJ / self.L0 * ((1.0 - _dot(b1, b2)) ** 2 + s**2))
 
     def internal(self, x_e: np.ndarray, R_e: np.ndarray, tangent: bool = True):
         """Internal forces ``f_e`` (n_e, 12) [N, N m] and tangent ``K_e`` (n_e, 12, 12) (None without ``tangent``),
@@ -118,13 +121,16 @@ class HemSet:
         k = (self.EI / self.L0)[:, None]
         G = (self.GJ / self.L0)[:, None]
         N = self.EA * (l - self.L0) / self.L0
-        # the twist's sine s = r . (b1 x b2) and its gradient
+        # the twist's sine s = r . (b1 x b2), the cosine c = b1 . b2 of the section vectors' angle, and their
+        # gradients
         s_r, s_b1, s_b2 = b12, _cross(b2, r), _cross(r, b1)
         Gs = G * s[:, None]
+        oc = 1.0 - _dot(b1, b2)  # 1 - c
+        Goc = G * oc[:, None]
         g = {"r": k * (-(4.0 + 2.0 * c2)[:, None] * a1 - (4.0 + 2.0 * c1)[:, None] * a2) + Gs * s_r,
              "a1": k * (2.0 * a2 - (4.0 + 2.0 * c2)[:, None] * r),
              "a2": k * (2.0 * a1 - (4.0 + 2.0 * c1)[:, None] * r),
-             "b1": Gs * s_b1, "b2": Gs * s_b2}
+             "b1": Gs * s_b1 - Goc * b2, "b2": Gs * s_b2 - Goc * b1}
         rg = _dot(r, g["r"])
         Pg = g["r"] - rg[:, None] * r
         f_d = N[:, None] * r + Pg / l[:, None]
@@ -149,9 +155,9 @@ class HemSet:
              ("a1", "a2"): 2.0 * kk * P,
              ("r", "b1"): GG * outer(s_r, s_b1) - Gs3 * skew(b2),
              ("r", "b2"): GG * outer(s_r, s_b2) + Gs3 * skew(b1),
-             ("b1", "b1"): GG * outer(s_b1, s_b1),
-             ("b2", "b2"): GG * outer(s_b2, s_b2),
-             ("b1", "b2"): GG * outer(s_b1, s_b2) - Gs3 * skew(r)}
+             ("b1", "b1"): GG * (outer(s_b1, s_b1) + outer(b2, b2)),
+             ("b2", "b2"): GG * (outer(s_b2, s_b2) + outer(b1, b1)),
+             ("b1", "b2"): GG * (outer(s_b1, s_b2) + outer(b2, b1)) - Gs3 * skew(r) - Goc[:, :, None] * _I3}
 
         def h(u, v):
             if (u, v) in H:

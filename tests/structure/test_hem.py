@@ -149,3 +149,20 @@ def test_its_energy_is_smooth_where_the_corotational_frame_is_singular():
     assert np.all(np.diff(U_h) > 0.0)
     # the beam: a jump of the energy between two samples 0.25 deg apart, far above its smooth change there
     assert np.max(np.abs(np.diff(U_b))) > 100 * np.max(np.abs(np.diff(U_h)))
+
+
+def test_its_torsion_rises_to_a_half_turn_and_bending_one_end_barely_enters_it():
+    """One node turned about the chord by tau: the torsion energy is ``GJ / L0 (1 - cos tau)``, rising to a half turn
+    (the sine of the twist alone would have a second minimum there, where a flipped trailing-edge node stayed, stop
+    43); one node bent by delta about an axis normal to the chord and its section vector changes it only at fourth
+    order (no bending energy from GJ)."""
+    L0, GJ = 0.4, 0.3
+    X0 = np.array([[0.0, 0.0, 0.0], [L0, 0.0, 0.0]])
+    conn = np.array([[0, 1]])
+    hs = HemSet(conn, X0, np.array([[0.0, 0.0, 1.0]]), 1e3, 0.0, GJ)
+    for tau in np.linspace(0.0, np.pi, 13):
+        R = np.stack([np.eye(3), expm(tau * np.array([1.0, 0.0, 0.0]))])[None]
+        assert hs.energy(X0[None], R)[0] == pytest.approx(GJ / L0 * (1.0 - np.cos(tau)), rel=1e-12, abs=1e-15)
+    for delta in (1e-2, 1e-1):
+        R = np.stack([np.eye(3), expm(delta * np.array([0.0, 1.0, 0.0]))])[None]
+        assert hs.energy(X0[None], R)[0] <= GJ / L0 * delta**4
