@@ -2,7 +2,7 @@
 
 For random large-deformation states (taut, wrinkled and slack membranes; large and tiny rotations, so that every
 series / closed-form branch of the rotation functions is taken) and for the real kite mesh, the numba and numpy
-backends of ``BeamSet`` and ``ShellSet`` must give the same force, tangent and energy to 1e-10 relative (they
+backends of ``BeamSet``, ``HemSet`` and ``ShellSet`` must give the same force, tangent and energy to 1e-10 relative (they
 differ only by round-off).  The finite-difference tangent and wrinkling tests of ``test_beam.py`` and
 ``test_shell.py`` are run again through each backend explicitly.
 """
@@ -10,12 +10,14 @@ differ only by round-off).  The finite-difference tangent and wrinkling tests of
 import numpy as np
 import pytest
 import test_beam as _tb  # noqa: I001  (sibling test modules: re-run their checks per backend)
+import test_hem as _th
 import test_shell as _ts
 
 from kite_env.geometry import build_kite
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
 from kite_env.structure import kernels
 from kite_env.structure.beam import BeamSet
+from kite_env.structure.hem import HemSet
 from kite_env.structure.rotations import expm
 from kite_env.structure.shell import SLACK, TAUT, WRINKLED, ShellSet
 from kite_env.structure.shell_bending import element_frame, local_rotations
@@ -160,6 +162,27 @@ def test_random_beams_agree(rot_scale):
         assert np.max(t) > (2.0 if rot_scale > 2 else 0.5)
 
 
+@pytest.mark.parametrize("rot_scale", [0.0, 0.05, 1.0, 3.0])
+def test_random_hem_rods_agree(rot_scale):
+    """The frame-free hem rods at no, small, large and past-a-half-turn nodal rotations."""
+    rng = np.random.default_rng(22)
+    n = 36
+    X0 = rng.normal(size=(2 * n, 3))
+    conn = np.arange(2 * n).reshape(n, 2)
+    stiff = dict(EA=rng.uniform(50, 200, n), EI=rng.uniform(1, 5, n), GJ=rng.uniform(1, 5, n))
+    hn, hp = _pair(HemSet, conn, X0, rng.normal(size=(n, 3)), **stiff)
+    x = X0 + 0.2 * rng.normal(size=X0.shape)
+    xe, Re = x[conn], expm(rot_scale * rng.normal(size=X0.shape))[conn]
+    f1, K1 = hn.internal(xe, Re)
+    f2, K2 = hp.internal(xe, Re)
+    assert f1.shape == f2.shape == (n, 12) and K1.shape == K2.shape == (n, 12, 12)
+    assert _per_element_rel(f1, f2) < RTOL and _per_element_rel(K1, K2) < RTOL
+    f3, K3 = hn.internal(xe, Re, tangent=False)  # residual only: the same forces bit for bit
+    assert K3 is None and np.array_equal(f3, f1)
+    with pytest.raises(ValueError):
+        hn.internal(xe[:2], Re[:2])
+
+
 def test_unloaded_and_rigidly_rotated_beams_agree():
     rng = np.random.default_rng(21)
     bs, X0, conn = _tb.random_beams(rng, 10)
@@ -266,6 +289,7 @@ def backend(request, monkeypatch):
     monkeypatch.setenv(kernels.ENV_VAR, request.param)
     assert BeamSet([[0, 1]], np.eye(3)[:2], [0.0, 0.0, 1.0], 1.0, 1.0, 1.0, 1.0).backend == request.param
     assert ShellSet([[0, 1, 2]], np.eye(3), 1.0, 0.3, 1.0).backend == request.param
+    assert HemSet([[0, 1]], np.eye(3)[:2], [0.0, 0.0, 1.0], 1.0, 1.0, 1.0).backend == request.param
     return request.param
 
 
@@ -273,6 +297,11 @@ def backend(request, monkeypatch):
 def test_beam_fd_tangent_per_backend(backend, rot_scale):
     _tb.test_tangent_matches_central_difference(rot_scale)
     _tb.test_internal_force_is_self_equilibrated()
+
+
+@pytest.mark.parametrize("rot_scale", [0.05, 2.5])
+def test_hem_fd_tangent_per_backend(backend, rot_scale):
+    _th.test_force_is_the_energy_gradient_and_the_tangent_its_derivative_at_large_rotations(rot_scale)
 
 
 @pytest.mark.parametrize("regime, Fin", [
