@@ -8,6 +8,7 @@ is singular.
 
 import numpy as np
 import pytest
+import test_beam as _tb  # noqa: I001  (the sibling module's finite differences)
 
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
@@ -24,29 +25,9 @@ def random_rods(rng, n_e):
                   GJ=rng.uniform(1, 5, n_e)), X0, conn, up
 
 
-def spun(R, a, e):
-    out = R.copy()
-    out[:, a] = expm(e) @ R[:, a]
-    return out
-
-
-def fd_tangent_and_gradient(hs, xe, Re, h=1e-6):
-    n_e = xe.shape[0]
-    K = np.zeros((n_e, 12, 12))
-    g = np.zeros((n_e, 12))
-    for a in range(2):
-        for k in range(3):
-            e = np.zeros(3)
-            e[k] = h
-            xp, xm = xe.copy(), xe.copy()
-            xp[:, a] += e
-            xm[:, a] -= e
-            K[:, :, 6 * a + k] = (hs.internal(xp, Re)[0] - hs.internal(xm, Re)[0]) / (2 * h)
-            g[:, 6 * a + k] = (hs.energy(xp, Re) - hs.energy(xm, Re)) / (2 * h)
-            Rp, Rm = spun(Re, a, e), spun(Re, a, -e)
-            K[:, :, 6 * a + 3 + k] = (hs.internal(xe, Rp)[0] - hs.internal(xe, Rm)[0]) / (2 * h)
-            g[:, 6 * a + 3 + k] = (hs.energy(xe, Rp) - hs.energy(xe, Rm)) / (2 * h)
-    return K, g
+def fd_tangent_and_gradient(hs, xe, Re):
+    """Central differences of the force (the tangent) and of the energy (the force), :func:`test_beam.fd_derivative`."""
+    return _tb.fd_tangent(hs, xe, Re), _tb.fd_derivative(hs.energy, xe, Re)
 
 
 @pytest.mark.parametrize("rot_scale", [0.05, 1.0, 2.5])
