@@ -59,7 +59,7 @@ import scipy.sparse as sp
 
 from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
-from kite_env.aero.sections import section_geometry, skew
+from kite_env.aero.sections import section_geometry, skew, spanwise_directions
 from kite_env.dynamics.kernels import wing_bridle_lines
 from kite_env.dynamics.particles import line_drag
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
@@ -535,7 +535,8 @@ class WingDynamics:
         return np.bincount(self._shell_tt.ravel(), weights=dK.ravel(), minlength=self.solver.asm.nnz)
 
     # ------------------------------------------------------------------ pieces
-    def section_weights(self, x_sec: np.ndarray, point: str | None = None) -> np.ndarray:
+    def section_weights(self, x_sec: np.ndarray, point: str | None = None, tube_d: np.ndarray | None = None
+                        ) -> np.ndarray:
         """Weights (n_sec, m) of the section nodes' velocities in the velocity of each section's rotation point
         (``aero.rotation_point``): the section's velocity field fitted, by least squares, as a linear function of
         the chordwise coordinate to all its nodes, evaluated at the 3/4-chord point (or at the LE node for
@@ -545,8 +546,9 @@ class WingDynamics:
         own share of the section's lift change: a flutter of the trailing-edge nodes at 20-80 Hz growing at 26 1/s
         (linearised wing at the start of the baseline flight; docs/flight_model.md, section 12). ``point``
         overrides ``aero.rotation_point``. As weights of a force on the section (``f_j = W_j F``) they place its
-        resultant at that point, and its power is ``F . v_p``."""
-        d = self.wing.mesh.section_tube_d
+        resultant at that point, and its power is ``F . v_p``. ``tube_d`` (n_sec,) [m]: the sections' LE tube
+        diameters (default: the mesh's, for its ``n_sec`` sections)."""
+        d = self.wing.mesh.section_tube_d if tube_d is None else tube_d
         e = x_sec[:, -1] - x_sec[:, 0]
         cn = np.linalg.norm(e, axis=1)
         s = np.einsum("ijk,ik->ij", x_sec - x_sec[:, :1], e) / cn[:, None]  # (n_sec, m) along the chord [m]
@@ -589,11 +591,15 @@ class WingDynamics:
     def _section_frames(self, x: np.ndarray):
         """The sections' geometry (frames ``e_x``, ``e_z``, ...) at the nodal positions ``x`` (n_nodes, 3)."""
         mesh = self.wing.mesh
-        x_sec = x[mesh.sections]
+        return self._frames_of(x[mesh.sections], mesh.section_tube_d, mesh.section_width)
+
+    def _frames_of(self, x_sec, tube_d, width, spanwise=None):
+        """The geometry of sections ``x_sec`` (n, m, 3) with LE tube diameters and widths (n,) [m]; ``spanwise``
+        (n, 3): their LE-line tangents, held (default: from the LE nodes of ``x_sec``, neighbours in order)."""
         if self.compiled:  # the same frames from the compiled section kernel (its loads unused)
-            return section_loads_fields(x_sec, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
-                                        _UNIT_X, 1.0)[11]
-        return section_geometry(x_sec, mesh.section_tube_d)
+            return section_loads_fields(x_sec, tube_d, width, np.zeros(3), np.zeros(3), _UNIT_X, 1.0,
+                                        spanwise=spanwise)[11]
+        return section_geometry(x_sec, tube_d, spanwise)
 
     def update_mass(self, x: np.ndarray | None = None) -> None:
         """Nodal mass blocks (n_nodes, 3, 3) [kg] at the shape ``x`` (n_nodes, 3) [m] (default: the current one):
@@ -639,17 +645,23 @@ class WingDynamics:
         the turn's centripetal acceleration, as if the air turned with the wing) and leave the pitch-damping couple.
         ``held``: the normals at the step's start (n_sec, 3), the sections' added masses (n_sec,) [kg] and the
         step [s]."""
-        n0, m_a, dt = held
         mesh = self.wing.mesh
-        x_sec = x[mesh.sections]
-        n1 = self._section_frames(x).e_z
-        n_dot = (n1 - n0) / dt  # (n_sec, 3)
-        W = self.section_weights(x_sec, "three_quarter_chord")  # (n_sec, m)
-        v_rel = np.einsum("sj,sjk->sk", W, v[mesh.sections]) - np.asarray(v_wind, float)[None, :]
-        F = -(m_a * np.einsum("sk,sk->s", n_dot, v_rel))[:, None] * n1  # (n_sec, 3)
+        f = self._normal_rate_section_forces(held, x[mesh.sections], v[mesh.sections], v_wind, mesh.section_tube_d,
+                                             mesh.section_width)
         out = np.zeros((len(v), 3))
-        np.add.at(out, mesh.sections.ravel(), (W[:, :, None] * F[:, None, :]).reshape(-1, 3))
+        np.add.at(out, mesh.sections.ravel(), f.reshape(-1, 3))
         return out
+
+    def _normal_rate_section_forces(self, held, x_sec, v_sec, v_wind, tube_d, width, spanwise=None):
+        """The forces (n, m, 3) [N] of :meth:`normal_rate_force` on the nodes of sections ``x_sec``, ``v_sec`` (n,
+        m, 3) (``held`` and the sections' data for the same ``n``; ``spanwise`` as :meth:`_frames_of`)."""
+        n0, m_a, dt = held
+        n1 = self._frames_of(x_sec, tube_d, width, spanwise).e_z
+        n_dot = (n1 - n0) / dt  # (n, 3)
+        W = self.section_weights(x_sec, "three_quarter_chord", tube_d)  # (n, m)
+        v_rel = np.einsum("sj,sjk->sk", W, v_sec) - np.asarray(v_wind, float)[None, :]
+        F = -(m_a * np.einsum("sk,sk->s", n_dot, v_rel))[:, None] * n1  # (n, 3)
+        return W[:, :, None] * F[:, None, :]
 
     def normal_rate_tangent(self, held, x: np.ndarray, v: np.ndarray, v_wind: np.ndarray):
         """Section blocks (n_sec, 3 m, 3 m) of ``-d f / d x`` and ``-d f / d v`` of :meth:`normal_rate_force` at the
@@ -661,27 +673,36 @@ class WingDynamics:
         Newton tangent, a tumbling mid-wing section's Newton stalled at a residual of 960 N in a step of dt/16 and
         the flight ended (docs/flight_model.md, section 37). The velocity part is exact (``f_j = W_j F`` with ``F =
         -m_a (n' . v_rel) n1`` and ``v_rel = sum_k W_k v_k - v_wind``: ``-df_j/dv_k = m_a W_j W_k n1 n'^T``); the
-        position part (the normals' and the weights' change) by central differences of the force, one node of every
-        section at a time (each section's force depends on, and acts on, its own nodes alone)."""
+        position part (the normals' and the weights' change) by central differences of the force, every coordinate of
+        every section perturbed in one stacked evaluation (each section's force acts on its own nodes and depends on
+        them, and on its neighbours' LE nodes only through the LE-line tangent of a nearly flat section's frame,
+        which is held, as in the loads' Jacobian)."""
         n0, m_a, dt = held
-        sec = self.wing.mesh.sections
+        mesh = self.wing.mesh
+        sec = mesh.sections
         n_sec, m = sec.shape
-        K = np.zeros((n_sec, m, 3, m, 3))
-        if self._sections_partition:  # (a node shared by two sections would be moved in both at once)
-            h = 1e-6
-            for j in range(m):
-                for k in range(3):
-                    xp, xm = x.copy(), x.copy()
-                    xp[sec[:, j], k] += h
-                    xm[sec[:, j], k] -= h
-                    d = self.normal_rate_force(held, xp, v, v_wind) - self.normal_rate_force(held, xm, v, v_wind)
-                    K[:, :, :, j, k] = -d[sec] / (2.0 * h)
+        p = 3 * m
+        # the 2 p perturbed copies of every section (coordinate q of each section by +-h) in one stacked call, the
+        # LE-line tangent held at the unperturbed wing's (as the loads' Jacobian, kite_env.aero.loads)
+        h = 1e-6
+        x_sec = x[sec]
+        xs = np.broadcast_to(x_sec, (2, p, n_sec, m, 3)).copy()
+        q = np.arange(p)
+        xs.reshape(2, p, n_sec, p)[0, q, :, q] += h
+        xs.reshape(2, p, n_sec, p)[1, q, :, q] -= h
+        rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (2 * p,) + np.shape(a)).reshape(
+            (2 * p * n_sec,) + np.shape(a)[1:]))
+        held_rep = (rep(n0), rep(m_a), dt)
+        f = self._normal_rate_section_forces(
+            held_rep, xs.reshape(-1, m, 3), rep(v[sec]), v_wind, rep(mesh.section_tube_d), rep(mesh.section_width),
+            spanwise=rep(spanwise_directions(x_sec[:, 0]))).reshape(2, p, n_sec, p)
+        K = (-(f[0] - f[1]) / (2.0 * h)).transpose(1, 2, 0)  # (n_sec, 3 m (force), 3 m (coordinate))
         n1 = self._section_frames(x).e_z
         n_dot = (n1 - n0) / dt
         W = self.section_weights(x[sec], "three_quarter_chord")
         C = (m_a[:, None, None, None, None] * W[:, :, None, None, None] * W[:, None, None, :, None]
              * n1[:, None, :, None, None] * n_dot[:, None, None, None, :])
-        return K.reshape(n_sec, 3 * m, 3 * m), C.reshape(n_sec, 3 * m, 3 * m)
+        return np.ascontiguousarray(K), C.reshape(n_sec, 3 * m, 3 * m)
 
     # ------------------------------------------------------------------ state
     def start(self, state: NodalState, v_nodes: np.ndarray, r_kcu, v_kcu, rest, g_K, v_wind) -> None:
