@@ -115,13 +115,14 @@ class StructureConfig:
     # "full": all of it (0.1 cm; 1.78 iterations: the part within a section is what a kept factorisation contracts
     # worst) (docs/flight_model.md, section 24)
     carry_residual: str = "sections"
-    # the added mass's force: "nodal_acceleration" = M_a times the nodes' acceleration (the default), which in a
-    # steady turn pulls each section with its added mass times the turn's centripetal acceleration, as if the air
-    # turned with the wing; "normal_velocity_rate" = Theodorsen's non-circulatory load (NACA Report 496): the mass
-    # blocks plus -m_a (n' . v_rel) n at the 3/4-chord point, so that a steady turn leaves only the pitch-damping
-    # couple. With it the wing turns faster per input but its 3.9 Hz yaw/twist oscillation grows fourfold in the
-    # baseline flight (docs/flight_model.md, section 27): an option until what damps that mode is known
-    added_mass_force: str = "nodal_acceleration"
+    # the added mass's force: "normal_velocity_rate" (the default since stop 44) = Theodorsen's non-circulatory load
+    # (NACA Report 496): the mass blocks M_a a plus -m_a (n' . v_rel) n at the 3/4-chord point, so that a steady turn
+    # leaves only the pitch-damping couple; "nodal_acceleration" = M_a a alone (the default before stop 44), which in
+    # a steady turn pulls each section with its added mass times the turn's centripetal acceleration, as if the air
+    # turned with the wing. The normal-rate part fed the wing's 3.9 Hz yaw/twist mode at the structural damping
+    # before stop 42 (docs/flight_model.md, sections 27-28 and 36); with the damping at the wing's lowest mode, the
+    # hem's frame-free rods and the force's Newton tangent (sections 37-38) it flies every flight M_a a flies
+    added_mass_force: str = "normal_velocity_rate"
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,9 @@ the wing has mass and moves:
   the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
   on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
   added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length. Its
-  force is ``M_a a`` by default; ``structure.added_mass_force = "normal_velocity_rate"`` adds the part of
-  Theodorsen's non-circulatory load that it misses (:meth:`WingDynamics.normal_rate_force`).
+  force is ``M_a a`` plus, by default (``structure.added_mass_force = "normal_velocity_rate"``, since stop 44), the
+  part of Theodorsen's non-circulatory load that ``M_a a`` misses (:meth:`WingDynamics.normal_rate_force`);
+  ``"nodal_acceleration"`` keeps ``M_a a`` alone.
 * **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
   inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
   damping of each section's deviation from it, rotation and deformation together, through the section damping of
