@@ -21,6 +21,13 @@ Cost, measured on the shared 2-core development container (best of repeats, pert
 ``load_jacobian`` (666 sections) ~190 us (NumPy ~2.0 ms). The first process after a change of this file compiles
 (a few seconds); later processes load the cache from ``__pycache__``.
 
+:func:`section_normal_rate_forces` computes Theodorsen's normal-rate load of the wing with inertia
+(``WingDynamics.normal_rate_force``, ``structure.added_mass_force = "normal_velocity_rate"``) from the same section
+frames (:func:`_section_axes`, shared with the loads' kernel) in one loop: the force costs about 12 us per call
+(with the sections gathered from the nodes and scattered back) where the NumPy path (the full loads kernel for the
+frames, the 3/4-chord weights, the force) took about 64 us at every Newton iterate, 9 % of the baseline flight's
+step (docs/flight_model.md, section 39).
+
 Backend selection is done by :func:`kite_env.aero.loads.section_loads` (``backend="auto" | "numba" | "numpy"``,
 resolved by :func:`kite_env.structure.kernels.resolve_backend`: environment variable ``KITE_ENV_ELEMENT_BACKEND``,
 else numba when importable). Without numba the kernel below runs as plain Python (correct, very slow).
@@ -149,6 +156,62 @@ def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25, neg=1):
 
 
 @njit(**_JIT)
+def _section_axes(x, i, n, m, flip, span, has_span):
+    """Section ``i``'s frame as ``section_geometry`` builds it: ``(r0, r1, r2, chord_nodes, e_x, e_y, e_z)`` (the LE
+    node, the LE-TE node distance [m] and the axes' nine components, flattened), from the section nodes ``x`` (n, m,
+    3); ``span``/``has_span``/``flip`` as in :func:`section_loads_kernel`."""
+    r0, r1, r2 = x[i, 0, 0], x[i, 0, 1], x[i, 0, 2]
+    c0, c1, c2 = x[i, m - 1, 0] - r0, x[i, m - 1, 1] - r1, x[i, m - 1, 2] - r2
+    chord_nodes = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    p = 1.0 / chord_nodes
+    ex0, ex1, ex2 = c0 * p, c1 * p, c2 * p
+    if has_span:
+        t0, t1, t2 = span[i, 0], span[i, 1], span[i, 2]
+    elif n == 1:
+        t0, t1, t2 = 0.0, 1.0, 0.0
+    else:  # spanwise_directions: central differences of the LE nodes, one-sided at the ends
+        lo = i - 1 if i > 0 else 0
+        hi = i + 1 if i < n - 1 else n - 1
+        t0, t1, t2 = x[hi, 0, 0] - x[lo, 0, 0], x[hi, 0, 1] - x[lo, 0, 1], x[hi, 0, 2] - x[lo, 0, 2]
+        if flip:
+            t0, t1, t2 = -t0, -t1, -t2
+    p = t0 * ex0 + t1 * ex1 + t2 * ex2  # orthogonalised against the chord, normalised
+    t0, t1, t2 = t0 - p * ex0, t1 - p * ex1, t2 - p * ex2
+    p = 1.0 / math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    t0, t1, t2 = t0 * p, t1 * p, t2 * p
+    # mean offset h of the nodes from the LE node, minus its chord component
+    inv_m = 1.0 / m
+    h0 = 0.0
+    h1 = 0.0
+    h2 = 0.0
+    for j in range(m):
+        h0 += x[i, j, 0] - r0
+        h1 += x[i, j, 1] - r1
+        h2 += x[i, j, 2] - r2
+    h0, h1, h2 = h0 * inv_m, h1 * inv_m, h2 * inv_m
+    p = h0 * ex0 + h1 * ex1 + h2 * ex2
+    h0, h1, h2 = h0 - p * ex0, h1 - p * ex1, h2 - p * ex2
+    h_len = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    # airfoil-plane normal h × e_x, oriented like the LE line
+    p = 1.0 / max(h_len, _TINY)
+    n0, n1, n2 = (h1 * ex2 - h2 * ex1) * p, (h2 * ex0 - h0 * ex2) * p, (h0 * ex1 - h1 * ex0) * p
+    cos_pl = n0 * t0 + n1 * t1 + n2 * t2
+    if cos_pl < 0.0:
+        n0, n1, n2 = -n0, -n1, -n2
+    # smoothstep blend to the LE tangent for nearly flat sections and planes far from the section's
+    u = min(max(h_len / (_FLAT_FRACTION * chord_nodes), 0.0), 1.0)
+    v = min(max((abs(cos_pl) - _PLANE_COS_NONE) / (_PLANE_COS_FULL - _PLANE_COS_NONE), 0.0), 1.0)
+    wgt = u * u * (3.0 - 2.0 * u) * v * v * (3.0 - 2.0 * v)
+    ey0, ey1, ey2 = wgt * n0 + (1.0 - wgt) * t0, wgt * n1 + (1.0 - wgt) * t1, wgt * n2 + (1.0 - wgt) * t2
+    p = ey0 * ex0 + ey1 * ex1 + ey2 * ex2
+    ey0, ey1, ey2 = ey0 - p * ex0, ey1 - p * ex1, ey2 - p * ex2
+    p = 1.0 / math.sqrt(ey0 * ey0 + ey1 * ey1 + ey2 * ey2)
+    ey0, ey1, ey2 = ey0 * p, ey1 * p, ey2 * p
+    ez0, ez1, ez2 = ex1 * ey2 - ex2 * ey1, ex2 * ey0 - ex0 * ey2, ex0 * ey1 - ex1 * ey0  # e_z = e_x × e_y
+    return r0, r1, r2, chord_nodes, ex0, ex1, ex2, ey0, ey1, ey2, ez0, ez1, ez2
+
+
+@njit(**_JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
                          has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25, rot_x=-1.0, neg=1):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
@@ -212,53 +275,8 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
     inv_2dt = 1.0 / (2.0 * dt) if has_prev else 0.0
     for i in range(n):
         # ---------------------------------------------------------------- section frame (section_geometry)
-        r0, r1, r2 = x[i, 0, 0], x[i, 0, 1], x[i, 0, 2]
-        c0, c1, c2 = x[i, m - 1, 0] - r0, x[i, m - 1, 1] - r1, x[i, m - 1, 2] - r2
-        chord_nodes = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-        p = 1.0 / chord_nodes
-        ex0, ex1, ex2 = c0 * p, c1 * p, c2 * p
-        if has_span:
-            t0, t1, t2 = span[i, 0], span[i, 1], span[i, 2]
-        elif n == 1:
-            t0, t1, t2 = 0.0, 1.0, 0.0
-        else:  # spanwise_directions: central differences of the LE nodes, one-sided at the ends
-            lo = i - 1 if i > 0 else 0
-            hi = i + 1 if i < n - 1 else n - 1
-            t0, t1, t2 = x[hi, 0, 0] - x[lo, 0, 0], x[hi, 0, 1] - x[lo, 0, 1], x[hi, 0, 2] - x[lo, 0, 2]
-            if flip:
-                t0, t1, t2 = -t0, -t1, -t2
-        p = t0 * ex0 + t1 * ex1 + t2 * ex2  # orthogonalised against the chord, normalised
-        t0, t1, t2 = t0 - p * ex0, t1 - p * ex1, t2 - p * ex2
-        p = 1.0 / math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        t0, t1, t2 = t0 * p, t1 * p, t2 * p
-        # mean offset h of the nodes from the LE node, minus its chord component
-        h0 = 0.0
-        h1 = 0.0
-        h2 = 0.0
-        for j in range(m):
-            h0 += x[i, j, 0] - r0
-            h1 += x[i, j, 1] - r1
-            h2 += x[i, j, 2] - r2
-        h0, h1, h2 = h0 * inv_m, h1 * inv_m, h2 * inv_m
-        p = h0 * ex0 + h1 * ex1 + h2 * ex2
-        h0, h1, h2 = h0 - p * ex0, h1 - p * ex1, h2 - p * ex2
-        h_len = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
-        # airfoil-plane normal h × e_x, oriented like the LE line
-        p = 1.0 / max(h_len, _TINY)
-        n0, n1, n2 = (h1 * ex2 - h2 * ex1) * p, (h2 * ex0 - h0 * ex2) * p, (h0 * ex1 - h1 * ex0) * p
-        cos_pl = n0 * t0 + n1 * t1 + n2 * t2
-        if cos_pl < 0.0:
-            n0, n1, n2 = -n0, -n1, -n2
-        # smoothstep blend to the LE tangent for nearly flat sections and planes far from the section's
-        u = min(max(h_len / (_FLAT_FRACTION * chord_nodes), 0.0), 1.0)
-        v = min(max((abs(cos_pl) - _PLANE_COS_NONE) / (_PLANE_COS_FULL - _PLANE_COS_NONE), 0.0), 1.0)
-        wgt = u * u * (3.0 - 2.0 * u) * v * v * (3.0 - 2.0 * v)
-        ey0, ey1, ey2 = wgt * n0 + (1.0 - wgt) * t0, wgt * n1 + (1.0 - wgt) * t1, wgt * n2 + (1.0 - wgt) * t2
-        p = ey0 * ex0 + ey1 * ex1 + ey2 * ex2
-        ey0, ey1, ey2 = ey0 - p * ex0, ey1 - p * ex1, ey2 - p * ex2
-        p = 1.0 / math.sqrt(ey0 * ey0 + ey1 * ey1 + ey2 * ey2)
-        ey0, ey1, ey2 = ey0 * p, ey1 * p, ey2 * p
-        ez0, ez1, ez2 = ex1 * ey2 - ex2 * ey1, ex2 * ey0 - ex0 * ey2, ex0 * ey1 - ex1 * ey0  # e_z = e_x × e_y
+        r0, r1, r2, chord_nodes, ex0, ex1, ex2, ey0, ey1, ey2, ez0, ez1, ez2 = _section_axes(
+            x, i, n, m, flip, span, has_span)
         axes[i, 0, 0], axes[i, 0, 1], axes[i, 0, 2] = ex0, ex1, ex2
         axes[i, 1, 0], axes[i, 1, 1], axes[i, 1, 2] = ey0, ey1, ey2
         axes[i, 2, 0], axes[i, 2, 1], axes[i, 2, 2] = ez0, ez1, ez2
@@ -359,6 +377,74 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
             node[0, i, j, 0] = fs * ex0 + fz * ez0
             node[0, i, j, 1] = fs * ex1 + fz * ez1
             node[0, i, j, 2] = fs * ex2 + fz * ez2
+
+
+@njit(**_JIT)
+def section_normal_rate_kernel(x, v, n_start, m_a, dt, tube_d, v_wind, span, has_span, out):
+    """Theodorsen's normal-rate load of every section on its nodes, written into ``out`` (n_sec, m, 3) [N]: the
+    force ``F = -m_a (n' . v_rel) n`` with the section normal ``n`` (``section_geometry``'s ``e_z``) at ``x``, its rate
+    ``n' = (n - n_start) / dt`` over the step, and the air-relative velocity ``v_rel`` of the section's 3/4-chord
+    point, placed at that point by the least-squares weights ``W_j`` of the chordwise velocity field (``f_j = W_j F``);
+    the reference is ``WingDynamics._normal_rate_section_forces`` with ``section_weights(.., "three_quarter_chord")``.
+    ``x``, ``v`` (n_sec, m, 3) [m], [m/s]; ``n_start`` (n_sec, 3); ``m_a`` (n_sec,) [kg]; ``tube_d`` (n_sec,) [m];
+    ``v_wind`` (1, 3) [m/s]; ``span``/``has_span`` as in :func:`section_loads_kernel`."""
+    n = x.shape[0]
+    m = x.shape[1]
+    flip = n > 1 and x[0, 0, 1] > x[n - 1, 0, 1]
+    inv_dt = 1.0 / dt
+    inv_m = 1.0 / m
+    for i in range(n):
+        r0, r1, r2, _, ex0, ex1, ex2, _, _, _, ez0, ez1, ez2 = _section_axes(x, i, n, m, flip, span, has_span)
+        # section_weights: chordwise coordinates s_j along the LE-TE line, the fit evaluated at the 3/4-chord point
+        e0, e1, e2 = x[i, m - 1, 0] - r0, x[i, m - 1, 1] - r1, x[i, m - 1, 2] - r2
+        cn = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        s_mean = 0.0
+        for j in range(m):
+            s_mean += ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn
+        s_mean *= inv_m
+        ss = 0.0
+        for j in range(m):
+            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
+            ss += ds * ds
+        d = tube_d[i]
+        g = ((0.75 * (cn + 0.5 * d) - 0.5 * d) - s_mean) / ss
+        # the 3/4-chord point's air-relative velocity sum_j W_j v_j - v_wind (W_j = 1/m + ds_j g)
+        w0 = -v_wind[0, 0]
+        w1 = -v_wind[0, 1]
+        w2 = -v_wind[0, 2]
+        for j in range(m):
+            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
+            wj = inv_m + ds * g
+            w0 += wj * v[i, j, 0]
+            w1 += wj * v[i, j, 1]
+            w2 += wj * v[i, j, 2]
+        f = -m_a[i] * (((ez0 - n_start[i, 0]) * w0 + (ez1 - n_start[i, 1]) * w1 + (ez2 - n_start[i, 2]) * w2) * inv_dt)
+        f0, f1, f2 = f * ez0, f * ez1, f * ez2
+        for j in range(m):
+            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
+            wj = inv_m + ds * g
+            out[i, j, 0] = wj * f0
+            out[i, j, 1] = wj * f1
+            out[i, j, 2] = wj * f2
+
+
+def section_normal_rate_forces(x_sec, v_sec, n_start, m_a, dt, tube_d, v_wind, spanwise=None):
+    """The compiled :func:`section_normal_rate_kernel`: forces (n_sec, m, 3) [N] on the nodes of sections ``x_sec``
+    moving with ``v_sec`` (n_sec, m, 3), normals ``n_start`` (n_sec, 3) at the step's start, added masses ``m_a``
+    (n_sec,) [kg], step ``dt`` [s], LE tube diameters ``tube_d`` (n_sec,) [m], uniform wind ``v_wind`` (3,) [m/s];
+    ``spanwise`` (n_sec, 3) held LE-line tangents (default: from the LE nodes)."""
+    x = np.ascontiguousarray(x_sec, dtype=float)
+    n, m, _ = x.shape
+    has_span = spanwise is not None
+    v_w = np.ascontiguousarray(v_wind, dtype=float).reshape(1, 3)
+    span = np.ascontiguousarray(spanwise, dtype=float) if has_span else v_w
+    if has_span and span.shape != (n, 3):
+        raise ValueError("section_normal_rate_forces: spanwise must be (n_sec, 3)")
+    out = np.empty((n, m, 3))
+    section_normal_rate_kernel(x, np.ascontiguousarray(v_sec, dtype=float), np.ascontiguousarray(n_start, dtype=float),
+                               np.ascontiguousarray(m_a, dtype=float), float(dt),
+                               np.ascontiguousarray(tube_d, dtype=float), v_w, span, has_span, out)
+    return out
 
 
 def section_loads_fields(x_sec, tube_d, width, v_kite, omega, v_wind, rho, x_sec_prev=None, dt=None,

@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from kite_env.aero.kernels import section_loads_fields
+from kite_env.aero.kernels import section_loads_fields, section_normal_rate_forces
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry, skew, spanwise_directions
 from kite_env.dynamics.kernels import wing_bridle_lines
@@ -650,13 +650,18 @@ class WingDynamics:
         f = self._normal_rate_section_forces(held, x[mesh.sections], v[mesh.sections], v_wind, mesh.section_tube_d,
                                              mesh.section_width)
         out = np.zeros((len(v), 3))
-        np.add.at(out, mesh.sections.ravel(), f.reshape(-1, 3))
+        if self._sections_partition:  # (each node in one section: no repeated index)
+            out[mesh.sections.ravel()] = f.reshape(-1, 3)
+        else:
+            np.add.at(out, mesh.sections.ravel(), f.reshape(-1, 3))
         return out
 
     def _normal_rate_section_forces(self, held, x_sec, v_sec, v_wind, tube_d, width, spanwise=None):
         """The forces (n, m, 3) [N] of :meth:`normal_rate_force` on the nodes of sections ``x_sec``, ``v_sec`` (n,
         m, 3) (``held`` and the sections' data for the same ``n``; ``spanwise`` as :meth:`_frames_of`)."""
         n0, m_a, dt = held
+        if self.compiled:  # the same forces in one compiled loop (kite_env.aero.kernels)
+            return section_normal_rate_forces(x_sec, v_sec, n0, m_a, dt, tube_d, v_wind, spanwise)
         n1 = self._frames_of(x_sec, tube_d, width, spanwise).e_z
         n_dot = (n1 - n0) / dt  # (n, 3)
         W = self.section_weights(x_sec, "three_quarter_chord", tube_d)  # (n, m)

@@ -919,6 +919,37 @@ def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
     assert base.structure.added_mass_force == "normal_velocity_rate"  # the default since stop 44
 
 
+def test_the_compiled_normal_rate_force_equals_the_numpy_reference():
+    """Theodorsen's normal-rate force (structure.added_mass_force = normal_velocity_rate) from the compiled section
+    loop (kite_env.aero.kernels.section_normal_rate_forces) against the NumPy path (section frames, 3/4-chord
+    weights, force), on a perturbed wing whose sections turn against the flow, with the LE-line tangents from the LE
+    nodes and held (the tangent's stacked evaluation): equal to round-off."""
+    from kite_env.aero.sections import spanwise_directions
+
+    wing = nominal_wing(Config().kite.name, Config())
+    d = WingDynamics(wing)
+    assert d.compiled
+    rng = np.random.default_rng(11)
+    x0 = wing.unloaded_state().x
+    x1 = x0 + 0.03 * rng.standard_normal(x0.shape)
+    d.update_mass(x1)
+    held = (d._section_frames(x0).e_z, d.section_added_mass, 2.5e-3)
+    v = np.array([-25.0, 1.0, 3.0]) + 4.0 * rng.standard_normal(x1.shape)
+    v_wind = np.array([2.0, -0.5, 0.3])
+    mesh = wing.mesh
+    x_sec, v_sec = x1[mesh.sections], v[mesh.sections]
+    args = (x_sec, v_sec, v_wind, mesh.section_tube_d, mesh.section_width)
+    compiled = [d.normal_rate_force(held, x1, v, v_wind), d._normal_rate_section_forces(held, *args),
+                d._normal_rate_section_forces(held, *args, spanwise=spanwise_directions(x_sec[:, 0]) + 0.1)]
+    d.compiled = False
+    reference = [d.normal_rate_force(held, x1, v, v_wind), d._normal_rate_section_forces(held, *args),
+                 d._normal_rate_section_forces(held, *args, spanwise=spanwise_directions(x_sec[:, 0]) + 0.1)]
+    for a, b in zip(compiled, reference):
+        assert np.abs(b).max() > 10.0  # [N] (not a comparison of zeros)
+        assert np.abs(a - b).max() <= 1e-11 * np.abs(b).max()
+    assert np.abs(compiled[2] - compiled[1]).max() > 1e-3 * np.abs(compiled[1]).max()  # the held tangent is used
+
+
 def test_the_normal_rate_forces_tangent_matches_finite_differences():
     """The tangent of Theodorsen's normal-rate force (structure.added_mass_force = normal_velocity_rate) in the step's
     Newton: its blocks ``-d f / d x`` and ``-d f / d v`` against central differences of the force, for a wing whose
