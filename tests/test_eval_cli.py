@@ -292,3 +292,32 @@ def test_a_start_without_a_converged_wing_is_one_message_and_nothing_written(tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert "reset failed: the wing did not converge at the start" in err[-1] and "nothing written" in err[-1]
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_a_numerical_failure_of_the_wing_with_inertia_is_exit_3_with_its_residual_history(tmp_path, capsys,
+                                                                                       monkeypatch):
+    """A step of the wing with inertia that fails even in sixteenths (forced here from t = 0.1 s) is a bug of the
+    simulator, not an end of the flight (issue 20): kite-eval says where and in which conditions, prints the wing
+    solver's residual history, exits 3 and writes nothing."""
+    from kite_env.dynamics.wing_dynamics import WingDynamics
+    from kite_env.fsi import WingConvergenceError
+
+    step = WingDynamics.step
+
+    def failing(self, dt, *args, **kw):
+        if self.t_forced >= 0.1:
+            raise WingConvergenceError("dynamic wing step failed: test: forced failure\nresidual history (last 2):\n"
+                                       "    1  5.0e+02\n    2  4.0e+02", [])
+        self.t_forced += dt
+        return step(self, dt, *args, **kw)
+
+    monkeypatch.setattr(WingDynamics, "t_forced", 0.0, raising=False)
+    monkeypatch.setattr(WingDynamics, "step", failing)
+    out = tmp_path / "run"
+    assert main(["--duration", "0.3", "--out", str(out)]) == 3
+    err = capsys.readouterr().err
+    first = [line for line in err.splitlines() if line.startswith("kite-eval: error:")]
+    assert len(first) == 1 and first[0].startswith("kite-eval: error: numerical failure at t = 0.1")
+    assert "(wind 5.000 m/s" in first[0] and first[0].endswith("nothing written")
+    assert "not an end of the flight" in err and "residual history (last 2)" in err and "4.0e+02" in err
+    assert not out.exists() and not list(tmp_path.iterdir())

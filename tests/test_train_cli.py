@@ -79,6 +79,42 @@ def test_resume_continues_from_the_last_checkpoint(tmp_path):
     assert (out / "checkpoints" / "model_64_steps.zip").is_file()
 
 
+@pytest.mark.slow  # the FE model: ~15-35 s
+def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(tmp_path, capsys, monkeypatch):
+    """A NumericalFailure of the wing with inertia during training (forced at the env's 25th step) is reported as
+    one error line with the failure's message, exit 3, after a checkpoint of what was learnt; --resume continues."""
+    from stable_baselines3 import PPO
+
+    from kite_env.dynamics.simulator import NumericalFailure, SimulationError
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    step = KiteFigureEightEnv.step
+    calls = [0]
+
+    def failing(self, action):
+        calls[0] += 1
+        if calls[0] == 25:
+            raise NumericalFailure(SimulationError("wing did not converge", "test: forced", "residual history (test)"),
+                                   0.5, "test conditions")
+        return step(self, action)
+
+    monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
+    out = tmp_path / "run"
+    hp = _hp(tmp_path, "ppo")
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, *SHORT]) == 3
+    err = capsys.readouterr().err
+    line = [x for x in err.splitlines() if x.startswith("kite-train: error:")]
+    assert len(line) == 1 and "numerical failure at t = 0.5000 s (test conditions): wing did not converge" in line[0]
+    assert line[0].endswith("continue with --resume") and "residual history (test)" in err
+    # the 24 steps made before the failing 25th are kept (the periodic checkpoint has 16), no final model
+    assert (out / "checkpoints" / "model_24_steps.zip").is_file() and not (out / "model.zip").exists()
+    monkeypatch.setattr(KiteFigureEightEnv, "step", step)
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, "--resume",
+                           *SHORT]) == 0
+    assert "resuming from model_24_steps.zip" in capsys.readouterr().err
+    assert PPO.load(out / "model.zip", device="cpu").num_timesteps >= 64  # (whole PPO rollouts of 16 from 24)
+
+
 def test_bad_input_is_one_clear_error(tmp_path, capsys):
     assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(tmp_path / "a"),
                            "--config", str(tmp_path / "missing.yaml")]) == 2

@@ -38,7 +38,10 @@ Exit status: 0 when the files were written, also when the kite crashed (a crash 
 ``metrics.json`` has ``crashed: true`` and the ``termination_reason``, and a warning goes to stderr); 2 for bad
 input (unknown policy, missing or damaged model file, unknown config key, wrong type, invalid value, missing config
 file, non-positive duration or episode count, unusable ``--out``), with one line ``kite-eval: error: ...`` on
-stderr and no output folder; 130 when interrupted.
+stderr and no output folder; 1 when no start converged; 3 when the wing with inertia failed numerically
+(:class:`~kite_env.dynamics.simulator.NumericalFailure`: a bug of the simulator, not an end of the flight), with
+``kite-eval: error: numerical failure at t = ... (the episode's conditions) ...; nothing written`` and the wing
+solver's residual history on stderr and no output folder; 130 when interrupted.
 """
 
 from __future__ import annotations
@@ -406,6 +409,7 @@ def main(argv=None) -> int:
         if bar is not None:
             bar.update(max(0.0, min(total, done[0] + t) - bar.n))
 
+    from kite_env.dynamics.simulator import NumericalFailure
     from kite_env.envs.figure_eight import StartError
 
     out.resolve().parent.mkdir(parents=True, exist_ok=True)
@@ -442,6 +446,13 @@ def main(argv=None) -> int:
             bar = None
         print(f"{PROG}: error: {exc}; nothing written", file=sys.stderr)
         return 1
+    except NumericalFailure as exc:  # a bug of the simulator: its message and residual history, nothing written
+        if bar is not None:
+            bar.close()
+            bar = None
+        first, _, rest = str(exc).partition("\n")
+        print(f"{PROG}: error: {first}; nothing written" + (f"\n{rest}" if rest else ""), file=sys.stderr)
+        return 3
     finally:
         if bar is not None:
             bar.close()

@@ -22,7 +22,10 @@ The training env is wrapped in ``VecMonitor`` (episode returns and lengths in ``
 the held-out seed ``seed + 10_000``. The run folder gets ``config.yml`` (the complete environment config, recipe
 and ``--set`` applied), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/``, periodic checkpoints with the
 VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final ``model.zip``
-(+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one.
+(+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one. A numerical failure of
+the wing with inertia (:class:`~kite_env.dynamics.simulator.NumericalFailure`, a bug of the simulator) in an env of
+this process (``dummy``) saves a checkpoint too and exits with status 3 and the failure's message; in a ``subproc``
+worker it ends the worker with that message and the run with SB3's error.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from pathlib import Path
 import yaml
 
 from kite_env.config import FIDELITIES, ConfigError, load_config
+from kite_env.dynamics.simulator import NumericalFailure
 
 ALGOS = ("ppo", "sac")
 ENV_ID = "KiteFigureEight-v0"
@@ -292,6 +296,9 @@ def train(args) -> Path:
     except KeyboardInterrupt:
         save_checkpoint("interrupted")
         raise
+    except NumericalFailure:  # a bug of the simulator (the wing with inertia): keep what was learnt, then report
+        save_checkpoint("numerical failure")
+        raise
     finally:
         venv.close()
         eval_env.close()
@@ -348,6 +355,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("kite-train: interrupted; continue with --resume", file=sys.stderr)
         return 130
+    except NumericalFailure as exc:
+        first, _, rest = str(exc).partition("\n")
+        print(f"kite-train: error: {first}; checkpoint saved, continue with --resume" + (f"\n{rest}" if rest else ""),
+              file=sys.stderr)
+        return 3
     print(f"kite-train: wrote {path}")
     return 0
 

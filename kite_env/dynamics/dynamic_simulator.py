@@ -152,7 +152,7 @@ class DynamicFlightSimulator(FlightSimulator):
         try:
             sol = dyn.step(dt, R.T @ (r_k - origin), R.T @ v_k, self.particles.rest, g_K, v_wind, X)
         except WingConvergenceError as exc:
-            raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
+            raise SimulationError("wing did not converge", str(exc).splitlines()[0], str(exc)) from exc
         if self.cfg.aero.induced_drag:
             wing._update_downwash(sol, X, dt)
         x_b, v_b = dyn.state.x[b], dyn.v[b]

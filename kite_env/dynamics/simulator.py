@@ -34,12 +34,38 @@ from kite_env.structure.rotations import expm
 
 
 class SimulationError(RuntimeError):
-    """The flight simulation cannot continue (wing did not converge, non-finite state); ``reason`` says why."""
+    """The flight simulation cannot continue (wing did not converge, non-finite state); ``reason`` says why,
+    ``detail`` in one line; ``history`` the wing solver's whole message with its residual history, where it failed."""
 
-    def __init__(self, reason: str, detail: str = ""):
+    def __init__(self, reason: str, detail: str = "", history: str = ""):
         super().__init__(f"{reason}: {detail}" if detail else reason)
         self.reason = reason
         self.detail = detail
+        self.history = history
+
+
+class NumericalFailure(SimulationError):
+    """A step of the wing with inertia that failed even when made in halves down to its smallest sub-step, or a
+    non-finite state: a bug of the simulator, never an episode end (issue 20; docs/flight_model.md, section 40).
+    Raised by the environment's ``step``; the message has the time, the conditions of the episode and the wing
+    solver's residual history."""
+
+    def __init__(self, error: SimulationError, t: float, conditions: str):
+        super().__init__(error.reason, error.detail, error.history)
+        self.t = t
+        self.args = (f"numerical failure at t = {t:.4f} s ({conditions}): {error.reason}"
+                     + (f": {error.detail}" if error.detail else "")
+                     + "\nthis is a bug of the simulator, not an end of the flight; please report it with the command"
+                     + (f"\n{error.history}" if error.history else ""),)
+
+    def __reduce__(self):  # picklable (a worker process hands it back whole)
+        return _numerical_failure, (self.args[0], self.reason, self.detail, self.history, self.t)
+
+
+def _numerical_failure(message: str, reason: str, detail: str, history: str, t: float) -> NumericalFailure:
+    exc = NumericalFailure(SimulationError(reason, detail, history), t, "")
+    exc.args = (message,)
+    return exc
 
 
 @dataclass
@@ -253,7 +279,7 @@ class FlightSimulator:
             step = None if first else (self.dt if dt is None else dt)
             sol = self.wing.solve(q_b, X, dt=step, support="prescribed", warm=True, commit=commit)
         except WingConvergenceError as exc:
-            raise SimulationError("wing did not converge", str(exc).splitlines()[0]) from exc
+            raise SimulationError("wing did not converge", str(exc).splitlines()[0], str(exc)) from exc
         if commit:
             self._F_k_K = -sol.F_b
             self._q_b_K = q_b

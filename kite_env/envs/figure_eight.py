@@ -18,7 +18,8 @@ from gymnasium import spaces
 
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
 from kite_env.control import LineActuator
-from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord, make_simulator
+from kite_env.dynamics.simulator import (FlightSimulator, NumericalFailure, SimulationError, StepRecord,
+                                         make_simulator)
 from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.flight import GROUND_ELEVATION_RAD
 from kite_env.trajectory import Lemniscate
@@ -143,8 +144,15 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Episode End
 
-    ``terminated``: ground contact (KCU below 3 deg elevation), slack tether (force below ``env.slack_tether_N``),
-    a wing solve that does not converge, or a non-finite state; ``info["termination_reason"]`` says which.
+    ``terminated``: ground contact (KCU below 3 deg elevation) or a slack tether (force below
+    ``env.slack_tether_N``; on the rod tether, or with the quasi-static wing); ``info["termination_reason"]`` says
+    which. With the wing with inertia (``structure.dynamic``, the default) nothing else ends an episode: a step
+    whose wing does not converge is made in halves (``dynamics.max_substep_halvings``, ``info["substepped_steps"]``),
+    and one that fails even so, or a non-finite state, raises
+    :class:`~kite_env.dynamics.simulator.NumericalFailure` with the episode's conditions and the solver's residual
+    history: a bug of the simulator, not an end of the flight. The paper's quasi-static wing
+    (``structure.dynamic=false``) and the surrogate end the episode there instead ("wing did not converge",
+    "non-finite state", "outside surrogate envelope").
     ``truncated``: at ``env.max_episode_s`` of simulated time.
 
     ## Arguments
@@ -269,6 +277,18 @@ class KiteFigureEightEnv(gym.Env):
             self.render()
         return obs, info
 
+    def _failure_raises(self) -> bool:
+        """Whether a numerical failure raises (the FE wing with inertia, ``structure.dynamic``: the simulator is total,
+        a failure is a bug) instead of ending the episode (the paper's quasi-static wing, which has no state to carry
+        it through a luffing canopy, and the surrogate's non-finite states)."""
+        return self.cfg.structure.dynamic and self.sim.fidelity_now == "fe"
+
+    def _conditions(self) -> str:
+        """The episode's drawn conditions, to reproduce a failure."""
+        e = self.episode_info
+        return (f"wind {e['wind_speed_mps']:.3f} m/s, turbulence {e['turbulence_intensity']:.4f}, wind seed "
+                f"{e['wind_seed']}, start s {e['start_s']:.4f}, start speed {e['initial_speed_mps']:.3f} m/s")
+
     def step(self, action):
         if self.rec is None:
             raise RuntimeError("call reset() before step()")
@@ -292,6 +312,8 @@ class KiteFigureEightEnv(gym.Env):
             try:
                 rec = self.sim.step(self.L_B, self.L_D)
             except SimulationError as exc:
+                if self._failure_raises():  # the wing with inertia: a bug, not an end (issue 20)
+                    raise NumericalFailure(exc, self.sim.t, self._conditions()) from exc
                 reason, detail = exc.reason, exc.detail
                 break
             self.rec = rec
@@ -311,6 +333,9 @@ class KiteFigureEightEnv(gym.Env):
         prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied
         obs, feats = self._observe(self.rec)
         if reason is None and not np.all(np.isfinite(obs)):
+            if self._failure_raises():
+                raise NumericalFailure(SimulationError("non-finite state", f"observation {obs}"), self.sim.t,
+                                       self._conditions())
             reason = "non-finite state"
         terms = reward_terms(cfg.env, self._tracking, feats["tether_force_N"], a, prev_action, reason is not None)
         reward = float(sum(terms.values()))
