@@ -394,35 +394,34 @@ def section_normal_rate_kernel(x, v, n_start, m_a, dt, tube_d, v_wind, span, has
     inv_dt = 1.0 / dt
     inv_m = 1.0 / m
     for i in range(n):
-        r0, r1, r2, _, ex0, ex1, ex2, _, _, _, ez0, ez1, ez2 = _section_axes(x, i, n, m, flip, span, has_span)
-        # section_weights: chordwise coordinates s_j along the LE-TE line, the fit evaluated at the 3/4-chord point
-        e0, e1, e2 = x[i, m - 1, 0] - r0, x[i, m - 1, 1] - r1, x[i, m - 1, 2] - r2
-        cn = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        r0, r1, r2, cn, ex0, ex1, ex2, _, _, _, ez0, ez1, ez2 = _section_axes(x, i, n, m, flip, span, has_span)
+        # section_weights: the chordwise coordinates s_j along the LE-TE line (held in out[i, j, 0] until the force
+        # overwrites them), their deviations ds_j from the mean, the fit's slope g to the 3/4-chord point
         s_mean = 0.0
         for j in range(m):
-            s_mean += ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn
+            sj = (x[i, j, 0] - r0) * ex0 + (x[i, j, 1] - r1) * ex1 + (x[i, j, 2] - r2) * ex2
+            out[i, j, 0] = sj
+            s_mean += sj
         s_mean *= inv_m
         ss = 0.0
+        v0 = v1 = v2 = 0.0  # sum_j v_j
+        u0 = u1 = u2 = 0.0  # sum_j ds_j v_j
         for j in range(m):
-            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
+            ds = out[i, j, 0] - s_mean
+            out[i, j, 0] = ds
             ss += ds * ds
+            v0, v1, v2 = v0 + v[i, j, 0], v1 + v[i, j, 1], v2 + v[i, j, 2]
+            u0, u1, u2 = u0 + ds * v[i, j, 0], u1 + ds * v[i, j, 1], u2 + ds * v[i, j, 2]
         d = tube_d[i]
         g = ((0.75 * (cn + 0.5 * d) - 0.5 * d) - s_mean) / ss
         # the 3/4-chord point's air-relative velocity sum_j W_j v_j - v_wind (W_j = 1/m + ds_j g)
-        w0 = -v_wind[0, 0]
-        w1 = -v_wind[0, 1]
-        w2 = -v_wind[0, 2]
-        for j in range(m):
-            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
-            wj = inv_m + ds * g
-            w0 += wj * v[i, j, 0]
-            w1 += wj * v[i, j, 1]
-            w2 += wj * v[i, j, 2]
+        w0 = inv_m * v0 + g * u0 - v_wind[0, 0]
+        w1 = inv_m * v1 + g * u1 - v_wind[0, 1]
+        w2 = inv_m * v2 + g * u2 - v_wind[0, 2]
         f = -m_a[i] * (((ez0 - n_start[i, 0]) * w0 + (ez1 - n_start[i, 1]) * w1 + (ez2 - n_start[i, 2]) * w2) * inv_dt)
         f0, f1, f2 = f * ez0, f * ez1, f * ez2
         for j in range(m):
-            ds = ((x[i, j, 0] - r0) * e0 + (x[i, j, 1] - r1) * e1 + (x[i, j, 2] - r2) * e2) / cn - s_mean
-            wj = inv_m + ds * g
+            wj = inv_m + out[i, j, 0] * g
             out[i, j, 0] = wj * f0
             out[i, j, 1] = wj * f1
             out[i, j, 2] = wj * f2

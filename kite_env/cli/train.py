@@ -39,7 +39,6 @@ from pathlib import Path
 import yaml
 
 from kite_env.config import FIDELITIES, ConfigError, load_config
-from kite_env.dynamics.simulator import NumericalFailure
 
 ALGOS = ("ppo", "sac")
 ENV_ID = "KiteFigureEight-v0"
@@ -209,6 +208,8 @@ def train(args) -> Path:
     import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
 
+    from kite_env.dynamics.simulator import NumericalFailure
+
     out = Path(args.out)
     cli_sets = [*args.set, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])]
     cfg = load_config(args.env_config, cli_sets)
@@ -347,6 +348,8 @@ def main(argv=None) -> int:
     if args.timesteps <= 0:
         print(f"kite-train: error: --timesteps must be positive, got {args.timesteps}", file=sys.stderr)
         return 2
+    from kite_env.dynamics.simulator import NumericalFailure
+
     try:
         path = train(args)
     except (UsageError, ConfigError) as exc:

@@ -53,19 +53,14 @@ class NumericalFailure(SimulationError):
     def __init__(self, error: SimulationError, t: float, conditions: str):
         super().__init__(error.reason, error.detail, error.history)
         self.t = t
+        self.conditions = conditions
         self.args = (f"numerical failure at t = {t:.4f} s ({conditions}): {error.reason}"
                      + (f": {error.detail}" if error.detail else "")
                      + "\nthis is a bug of the simulator, not an end of the flight; please report it with the command"
                      + (f"\n{error.history}" if error.history else ""),)
 
-    def __reduce__(self):  # picklable (a worker process hands it back whole)
-        return _numerical_failure, (self.args[0], self.reason, self.detail, self.history, self.t)
-
-
-def _numerical_failure(message: str, reason: str, detail: str, history: str, t: float) -> NumericalFailure:
-    exc = NumericalFailure(SimulationError(reason, detail, history), t, "")
-    exc.args = (message,)
-    return exc
+    def __reduce__(self):  # rebuilt from its parts when pickled (a worker process hands it back whole)
+        return NumericalFailure, (SimulationError(self.reason, self.detail, self.history), self.t, self.conditions)
 
 
 @dataclass

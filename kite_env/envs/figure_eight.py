@@ -18,8 +18,7 @@ from gymnasium import spaces
 
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
 from kite_env.control import LineActuator
-from kite_env.dynamics.simulator import (FlightSimulator, NumericalFailure, SimulationError, StepRecord,
-                                         make_simulator)
+from kite_env.dynamics.simulator import FlightSimulator, NumericalFailure, SimulationError, StepRecord, make_simulator
 from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.flight import GROUND_ELEVATION_RAD
 from kite_env.trajectory import Lemniscate
