@@ -188,13 +188,17 @@ class DynamicsConfig:
     gravity_mps2: float = 9.81  # [m/s^2]
     dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
     baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
-    # ground station (FlightSimulator, docs/flight_model.md section 11): "fixed" = the paper's constant tether
-    # length; "force" = a winch in force control reeling out (traction phase), the reel-out speed following
-    # (F_t - winch_force_N) / winch_damping_Ns_per_m within [0, winch_speed_max_mps] with the time constant
+    # ground station (FlightSimulator, docs/flight_model.md sections 11 and 43): "fixed" = the paper's constant tether
+    # length (Table 1); "force" = a winch with an upper force limit: it holds the tether at its length while the
+    # tether force stays below winch_force_N and reels out above it (traction phase; no reel-in), the reel-out speed
+    # following (F_t - winch_force_N) / winch_damping_Ns_per_m within [0, winch_speed_max_mps] with the time constant
     # winch_time_constant_s (after the winch models of Fechner et al. 2015, Renewable Energy 83, 705, and the
-    # force-limited reel-out of van der Vlugt et al. 2019, Renewable Energy 131, 83)
-    winch: str = "fixed"
-    winch_force_N: float = 8000.0  # set tether force of the reel-out [N]
+    # force-limited reel-out of van der Vlugt et al. 2019, Renewable Energy 131, 83). The default since stop 46: the
+    # paper's force controller (Eq. 18-19), meant "to keep the tension in the tether between a minimum and maximum
+    # value" (Sect. II.D), cannot depower this four-point wing, and the paper names the real system's force control
+    # as the ground station's (Sect. III); below the set force the flight is the paper's constant tether.
+    winch: str = "force"
+    winch_force_N: float = 15000.0  # upper tether force limit of the ground station [N] (a set point: section 43)
     winch_damping_Ns_per_m: float = 1000.0  # tether force rise per m/s of reel-out speed [N s/m]
     winch_speed_max_mps: float = 10.0  # [m/s]
     winch_time_constant_s: float = 0.5  # lag of the reel-out speed behind its set value [s]

@@ -430,7 +430,8 @@ class SurrogateKites:
         if n < 1:
             raise ValueError(f"n must be at least 1, got {n}")
         if cfg.dynamics.winch != "fixed":
-            raise ValueError("the fast fidelity flies the paper's constant tether: dynamics.winch must be 'fixed', "
+            raise ValueError("the fast fidelity flies the paper's constant tether: dynamics.winch must be 'fixed' "
+                             f"(configs/legacy_v0.yaml, the model its reduced-order wing was fitted to, sets it), "
                              f"got {cfg.dynamics.winch!r}")
         self.cfg, self.n, self.dt = cfg, int(n), cfg.dynamics.dt_s
         self.q_design = np.ascontiguousarray(q_design, dtype=float)

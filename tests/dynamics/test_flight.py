@@ -137,11 +137,22 @@ def test_predictor_corrector_coupling_agrees_with_the_explicit_one():
     assert abs(a.tether_force - b.tether_force) < 0.02 * a.tether_force
 
 
-def test_the_paper_tether_keeps_its_length(flight):
-    """dynamics.winch = "fixed" (default): the constant tether of the paper's model, no reel-out."""
+def test_below_the_ground_stations_force_limit_the_tether_keeps_the_papers_length(flight):
+    """The default ground station (dynamics.winch = "force", 15 kN) holds the tether at the paper's constant length
+    while the tether force stays below its limit: no reel-out, and the flight is the one of dynamics.winch = "fixed"
+    (the paper's constant tether, Table 1) to the last bit."""
     _, _, recs = flight
+    cfg = Config()
+    assert cfg.dynamics.winch == "force" and cfg.dynamics.winch_force_N == 15000.0
+    assert all(r.tether_force < cfg.dynamics.winch_force_N for r in recs)
     assert all(r.tether_length == 80.0 and r.reel_speed == 0.0 for r in recs)
     assert all(r.substeps == 1 for r in recs)
+    sim = FlightSimulator(dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, winch="fixed")),
+                          UniformWind())
+    start(sim)
+    for rec in recs:
+        fixed = sim.step(sim.L_B0, sim.L_D0)
+        assert np.array_equal(fixed.state.r, rec.state.r) and fixed.tether_force == rec.tether_force
 
 
 def test_winch_in_force_control_reels_out_and_keeps_the_kcu_on_the_tether(flight):
