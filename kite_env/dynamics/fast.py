@@ -313,7 +313,8 @@ def _line_state_one(rk, vk, rest, k_c, c_c, T_out, l_out):
 
 @njit(**_JIT)
 def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd, line_diameter,
-                   tether_diameter, tether_length, tip_lengths, pair_damping, gravity, alpha, a, lam, work):
+                   tether_diameter, tether_length, reel_speed, tip_lengths, pair_damping, gravity, alpha, a, lam,
+                   work):
     """:func:`particle_accelerations_into` of one kite with the wing reactions ``yk[:12]`` (F_b in K; the wing
     pulls A-D with ``-F_b``) into ``a`` (5, 3) and ``lam`` (3,). The force is the wing's own (interpolation at
     fraction 0 between two equal ends: no condensed-stiffness correction, the wing is evaluated at the stage)."""
@@ -321,15 +322,15 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
         for c in range(3):
             F0[i, c] = -yk[3 * i + c]
     particle_accelerations_into(rk, vk, wind5, F0, F0, 0.0, True, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd,
-                                line_diameter, tether_diameter, tether_length, 0.0, tip_lengths, pair_damping, gravity,
-                                alpha, zero_K, False, a, lam, work)
+                                line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths, pair_damping,
+                                gravity, alpha, zero_K, False, a, lam, work)
 
 
 @njit(**_JIT)
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
-               tether_length, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether, tension, length,
-               status):
+               tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether,
+               tension, length, status):
     """One RK4 step of ``dt`` for every ``active`` kite, in place (:class:`SurrogateKites.step`).
 
     Stage 1 uses ``Y`` and ``wind`` of the current states (the end of the last step); stages 2-4 evaluate the wing
@@ -340,6 +341,10 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     ``wind``, ``R`` at the new states, ``tether`` the tether force at the start of the step [N], the bridle-line
     ``tension`` and ``length`` (n, 4) and ``status`` (:data:`OK`; :data:`NON_FINITE`; :data:`OUTSIDE`: an input
     beyond ``[lo, hi]`` (30,)).
+
+    The ground station (``dynamics.winch``, :meth:`kite_env.dynamics.simulator.FlightSimulator._winch`): each kite's
+    tether length ``tether_length`` (n,) grows within the step at its reel-out speed ``reel_speed`` (n,), held over
+    the step; after it the speed follows the step's tether force, ``winch = (on, F_set, c_w, v_max, tau)``.
     """
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
@@ -365,10 +370,11 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
         if not active[k]:
             continue
         r0, v0 = r[k], v[k]
+        l0, ld = tether_length[k], reel_speed[k]
         _accelerations(r0, v0, wind[k], Y[k], F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                       line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity, alpha,
+                       line_diameter, tether_diameter, l0, ld, tip_lengths, pair_damping[k], gravity, alpha,
                        ka[0], lam, work)
-        tether[k] = -lam[0] * tether_length
+        tether[k] = -lam[0] * l0
         kv[0] = v0
         for st in range(1, 4):
             # stages 2, 3 at t + dt/2 from (kv, ka) of the stage before; stage 4 at t + dt
@@ -382,7 +388,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                         amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf, turb[k], True)
             mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, h2, ys)
             _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
-                           line_diameter, tether_diameter, tether_length, tip_lengths, pair_damping[k], gravity,
+                           line_diameter, tether_diameter, l0 + h * ld, ld, tip_lengths, pair_damping[k], gravity,
                            alpha, ka[st], lam, work)
         ok = True
         for i in range(5):
@@ -392,10 +398,14 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                 if not (math.isfinite(rs[i, c]) and math.isfinite(vn[i, c])):
                     ok = False
         t[k] = t[k] + dt
+        tether_length[k] = l0 + dt * ld
         if ok:
-            rp, vp = project_constraints(rs, vn, m, tether_length, tip_lengths, 3, 0.0)
+            rp, vp = project_constraints(rs, vn, m, tether_length[k], tip_lengths, 3, ld)
         else:
             rp, vp = rs, vn
+        if winch[0] > 0.0:  # the reel-out speed of the next step
+            v_set = min(max((tether[k] - winch[1]) / winch[2], 0.0), winch[3])
+            reel_speed[k] = v_set + (ld - v_set) * math.exp(-dt / winch[4])
         for i in range(5):
             for c in range(3):
                 r[k, i, c] = rp[i, c]
@@ -420,7 +430,8 @@ class SurrogateKites:
     n : int, number of kites
 
     State (rows = kites): ``r``, ``v`` (n, 5, 3), ``t`` (n,), ``rest`` (n, 4) line rest lengths, ``pair_damping``
-    (n, 4), the wind of each kite (:meth:`set_wind`). After :meth:`evaluate` or :meth:`step`: ``Y`` (n, 17) the
+    (n, 4), ``tether_length`` and ``reel_speed`` (n,) of the ground station (``dynamics.winch``; the paper's constant
+    tether with ``fixed``, or below the force limit of ``force``), the wind of each kite (:meth:`set_wind`). After :meth:`evaluate` or :meth:`step`: ``Y`` (n, 17) the
     wing outputs at the current states, ``X`` (n, 30) their inputs, ``R`` (n, 3, 3) frame K, ``wind`` (n, 5, 3),
     ``tension``/``length`` (n, 4) of the bridle lines, ``tether_force`` (n,) [N] (constraint force at the start of
     the last step), ``status`` (n,) (:data:`OK`, :data:`NON_FINITE`, :data:`OUTSIDE`).
@@ -429,10 +440,6 @@ class SurrogateKites:
     def __init__(self, cfg, surrogate, q_design: np.ndarray, tip_lengths, n: int, envelope_margin: float = 0.1):
         if n < 1:
             raise ValueError(f"n must be at least 1, got {n}")
-        if cfg.dynamics.winch != "fixed":
-            raise ValueError("the fast fidelity flies the paper's constant tether: dynamics.winch must be 'fixed' "
-                             f"(configs/legacy_v0.yaml, the model its reduced-order wing was fitted to, sets it), "
-                             f"got {cfg.dynamics.winch!r}")
         self.cfg, self.n, self.dt = cfg, int(n), cfg.dynamics.dt_s
         self.q_design = np.ascontiguousarray(q_design, dtype=float)
         self.tip_lengths = np.asarray(tip_lengths, dtype=float)
@@ -475,6 +482,11 @@ class SurrogateKites:
         self.tension = np.zeros((n, 4))
         self.length = np.zeros((n, 4))
         self.tether_force = np.full(n, np.nan)
+        # the ground station (dynamics.winch): each kite's tether length and reel-out speed
+        self.tether_length = np.full(n, float(self.l_t))
+        self.reel_speed = np.zeros(n)
+        self._winch = np.array([1.0 if dyn.winch == "force" else 0.0, dyn.winch_force_N, dyn.winch_damping_Ns_per_m,
+                                dyn.winch_speed_max_mps, dyn.winch_time_constant_s])
         self.status = np.zeros(n, dtype=np.int64)
         self._all = np.ones(n, dtype=np.bool_)
 
@@ -496,6 +508,7 @@ class SurrogateKites:
         """Place kite ``k`` at positions/velocities ``r``, ``v`` (5, 3), time ``t``, with the tip-pair stiffness
         (4,) [N/m] of its start and the steering-line rest lengths."""
         self.r[k], self.v[k], self.t[k] = r, v, t
+        self.tether_length[k], self.reel_speed[k] = self.l_t, 0.0
         self.pair_damping[k] = ParticleSystem(self.cfg.dynamics, self.tip_lengths, pair_stiffness,
                                               self.cfg.aero.rho_kg_m3).pair_damping
         self.rest[k, 1], self.rest[k, 3] = L_B, L_D
@@ -531,9 +544,10 @@ class SurrogateKites:
             self.rest[active, 3] = np.asarray(L_D, dtype=float)[active]
         step_kites(self.dt, active, self.t, self.r, self.v, self.rest, self.pair_damping, self.q_design, self.wind_f,
                    self.wind_i, self.wavevec_t, self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights,
-                   self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d, self.l_t,
-                   self.tip_lengths, self.g, self.baumgarte, self._lo, self._hi, self.X, self.Y, self.wind, self.turb,
-                   self.R, self.tether_force, self.tension, self.length, self.status)
+                   self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d,
+                   self.tether_length, self.reel_speed, self._winch, self.tip_lengths, self.g, self.baumgarte,
+                   self._lo, self._hi, self.X, self.Y, self.wind, self.turb, self.R, self.tether_force, self.tension,
+                   self.length, self.status)
         return self.status
 
 
@@ -564,9 +578,10 @@ class _FastRecord(StepRecord):
     ``v_kite``, ``omega``, ``v_wind``) built when first read (the environment reads them only at the end of a
     control step)."""
 
-    def __init__(self, t, r, v, Y, X, R, tension, length, tether_force, nodes):
+    def __init__(self, t, r, v, Y, X, R, tension, length, tether_force, nodes, tether_length, reel_speed):
         self.t, self.state, self.R_wk = t, ParticleState(r, v), R
         self.line_tension, self.line_length, self.tether_force = tension, length, tether_force
+        self.tether_length, self.reel_speed = tether_length, reel_speed
         self.constraint_drift = _ZERO3
         self._Y, self._X, self._nodes = Y, X, nodes
 
@@ -674,7 +689,7 @@ class SurrogateFlightSimulator(FlightSimulator):
         ks = self.kites
         return _FastRecord(float(ks.t[0]), ks.r[0].copy(), ks.v[0].copy(), ks.Y[0].copy(), ks.X[0].copy(),
                            ks.R[0].copy(), ks.tension[0].copy(), ks.length[0].copy(), float(ks.tether_force[0]),
-                           self.wing.mesh.nodes)
+                           self.wing.mesh.nodes, float(ks.tether_length[0]), float(ks.reel_speed[0]))
 
     def _solve_wing(self, first: bool = False, commit: bool = True, state=None, t=None):
         """At the end of :meth:`reset`: hand the placed kite to the batched arrays and evaluate the wing."""
@@ -711,6 +726,8 @@ class SurrogateFlightSimulator(FlightSimulator):
         fe.particles.set_steering(float(self.kites.rest[0, 1]), float(self.kites.rest[0, 3]))
         fe.state = ParticleState(self.kites.r[0].copy(), self.kites.v[0].copy())
         fe.t = float(self.kites.t[0])
+        fe.tether_length, fe.reel_speed, fe._t_step = (float(self.kites.tether_length[0]),
+                                                        float(self.kites.reel_speed[0]), fe.t)
         self.wing.reset()
         self._fe_rec = fe._solve_wing(first=True)
         self._fe = fe

@@ -45,7 +45,8 @@ from kite_env.flight import GROUND_ELEVATION_RAD
 
 #: per-kite rows of SurrogateKites copied from a single env's simulator after its reset
 _KITE_ROWS = ("r", "v", "t", "rest", "pair_damping", "wind_f", "wind_i", "wavevec_t", "phase0", "omega_m", "amp",
-              "X", "Y", "wind", "turb", "R", "tension", "length", "tether_force", "status")
+              "X", "Y", "wind", "turb", "R", "tension", "length", "tether_force", "tether_length", "reel_speed",
+              "status")
 #: rows an observation needs (kept from before a physics step that fails)
 _OBS_ROWS = ("r", "v", "t", "R", "X", "tension", "length", "tether_force")
 _REASONS = (None, "ground", "slack tether", "non-finite particle state", "outside surrogate envelope",
@@ -93,7 +94,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self._ctrl = e0._ctrl_cfg
         self._observer = e0._observer
         self._low, self._high = e0.observation_space.low, e0.observation_space.high
-        self._z_ground = math.sin(GROUND_ELEVATION_RAD) * cfg.dynamics.tether_length_m
+        self._sin_ground = math.sin(GROUND_ELEVATION_RAD)  # ground contact: the KCU below 3 deg elevation
         self.kites: SurrogateKites | None = None  # built at the first reset (from the first kite's simulator)
         self.steps = np.zeros(n, dtype=np.int64)
         self.last_action = np.zeros(n)
@@ -213,7 +214,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
                     for name in _OBS_ROWS:  # the observation is that of the last good state
                         getattr(ks, name)[i] = snap[name][i]
                 active &= ~bad
-            ground = active & (ks.r[:, 4, 2] < self._z_ground)
+            ground = active & (ks.r[:, 4, 2] < self._sin_ground * ks.tether_length)
             slack = active & ~ground & (ks.tether_force < cfg.env.slack_tether_N)
             code[ground] = _GROUND
             code[slack] = _SLACK

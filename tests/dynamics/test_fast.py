@@ -137,6 +137,36 @@ def test_agrees_with_full_model_over_a_short_flight(setup):
     assert np.linalg.norm(b.state.r[4] - a.state.r[4]) < 0.3  # of 17 m flown
 
 
+def test_the_ground_station_reels_out_as_in_the_full_model(setup):
+    """dynamics.winch = "force" in the fast fidelity: above the set force each kite's reel-out speed follows
+    (F_t - F_set) / c_w with its lag, as :meth:`FlightSimulator._winch`; the tether length grows by each step's
+    reel-out, the KCU stays on the tether, its radial speed is the reel speed, and the records carry length and speed.
+    With "fixed" (configs/legacy_v0.yaml) the tether keeps its 80 m."""
+    cfg, wing, sw, path = setup
+    fixed = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=sw, wing=wing)
+    _start(fixed, path)
+    recs = [fixed.step(fixed.L_B0, fixed.L_D0) for _ in range(40)]
+    assert all(r.tether_length == 80.0 and r.reel_speed == 0.0 for r in recs)
+    cfg = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, winch="force", winch_force_N=1000.0,
+                                                                winch_time_constant_s=0.05))
+    sim = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=sw, wing=wing)
+    _start(sim, path)
+    d = cfg.dynamics
+    l_t, v_r = 80.0, 0.0
+    for _ in range(40):
+        rec = sim.step(sim.L_B0, sim.L_D0)
+        l_t += d.dt_s * v_r  # the step reels out at the speed set after the previous one
+        v_step = v_r
+        v_set = min(max((rec.tether_force - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
+        v_r = v_set + (v_r - v_set) * np.exp(-d.dt_s / d.winch_time_constant_s)
+        assert rec.tether_length == pytest.approx(l_t, abs=1e-12) and rec.reel_speed == pytest.approx(v_r, abs=1e-12)
+        assert np.linalg.norm(rec.state.r[4]) == pytest.approx(l_t, abs=1e-9)
+    assert rec.tether_length > 80.1 and 1.0 < rec.reel_speed < 6.0
+    r, v = rec.state.r[4], rec.state.v[4]
+    assert r @ v / np.linalg.norm(r) == pytest.approx(v_step, rel=1e-6)  # the KCU moves out at the step's reel speed
+    assert rec.tether_force < 0.9 * recs[-1].tether_force  # reeling out lowers the traction
+
+
 def test_outside_the_envelope_raises_or_falls_back(setup):
     """A kite pushed beyond the sampled inputs ends with 'outside surrogate envelope' naming the inputs; with the
     fallback it continues in the FE model."""
