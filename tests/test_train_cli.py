@@ -115,6 +115,49 @@ def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(
     assert PPO.load(out / "model.zip", device="cpu").num_timesteps >= 64  # (whole PPO rollouts of 16 from 24)
 
 
+def test_a_numerical_failure_in_a_subproc_worker_saves_a_checkpoint_and_exits_3(tmp_path, capsys, monkeypatch):
+    """The same with the envs in subproc workers (forked here, so that they inherit the forced failure at each
+    worker's 13th step): the worker writes its NumericalFailure into the run folder before it ends, and the run
+    reports it as one error line with its message, exit 3, after a checkpoint; the report is removed; --resume
+    continues."""
+    import stable_baselines3.common.vec_env as sb3_vec
+
+    from kite_env.dynamics.simulator import NumericalFailure, SimulationError
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    class ForkedSubprocVecEnv(sb3_vec.SubprocVecEnv):
+        def __init__(self, env_fns, start_method=None):
+            super().__init__(env_fns, start_method="fork")
+
+    step = KiteFigureEightEnv.step
+    calls = [0]
+
+    def failing(self, action):
+        calls[0] += 1
+        if calls[0] == 13:
+            raise NumericalFailure(SimulationError("wing did not converge", "test: forced", "residual history (test)"),
+                                   0.26, "test conditions")
+        return step(self, action)
+
+    monkeypatch.setattr(sb3_vec, "SubprocVecEnv", ForkedSubprocVecEnv)
+    monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
+    out = tmp_path / "run"
+    hp = _hp(tmp_path, "ppo")
+    args = ["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, "--n-envs", "2",
+            "--vec-env", "subproc", *SHORT]
+    assert train_cli.main(args) == 3
+    err = capsys.readouterr().err
+    line = [x for x in err.splitlines() if x.startswith("kite-train: error:")]
+    assert len(line) == 1 and "numerical failure at t = 0.2600 s (test conditions): wing did not converge" in line[0]
+    assert line[0].endswith("continue with --resume") and "residual history (test)" in err
+    # 12 steps of each of the two workers were made before their 13th failed
+    assert (out / "checkpoints" / "model_24_steps.zip").is_file() and not (out / "model.zip").exists()
+    assert not (out / train_cli.WORKER_FAILURES).exists()
+    monkeypatch.setattr(KiteFigureEightEnv, "step", step)
+    assert train_cli.main([*args, "--resume"]) == 0
+    assert "resuming from model_24_steps.zip" in capsys.readouterr().err and (out / "model.zip").is_file()
+
+
 def test_bad_input_is_one_clear_error(tmp_path, capsys):
     assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(tmp_path / "a"),
                            "--config", str(tmp_path / "missing.yaml")]) == 2

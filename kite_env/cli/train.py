@@ -24,8 +24,9 @@ and ``--set`` applied), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/
 VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final ``model.zip``
 (+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one. A numerical failure of
 the wing with inertia (:class:`~kite_env.dynamics.simulator.NumericalFailure`, a bug of the simulator) in an env of
-this process (``dummy``) saves a checkpoint too and exits with status 3 and the failure's message; in a ``subproc``
-worker it ends the worker with that message and the run with SB3's error.
+this process (``dummy``) or in a ``subproc`` worker (which writes it into ``OUT/.worker_failures`` before it ends:
+the worker prints its traceback, this process reads the failure back) saves a checkpoint too and exits with status 3
+and the failure's message.
 """
 
 from __future__ import annotations
@@ -131,19 +132,92 @@ def recipe_overrides(hp: dict) -> list[str]:
     return out
 
 
-def _make_env(cfg):
+#: in a subproc worker, a NumericalFailure is written here (in the run folder) before the worker ends with it
+WORKER_FAILURES = ".worker_failures"
+
+
+def _make_env(cfg, report_dir: Path | None = None):
+    """A thunk making the env of ``cfg``; with ``report_dir`` (``subproc`` workers) the env writes a
+    :class:`~kite_env.dynamics.simulator.NumericalFailure` that ends its worker into that folder first, so that the
+    main process can report it as in one process (:func:`_worker_failure`)."""
+
     def thunk():
         from kite_env.envs.figure_eight import KiteFigureEightEnv
 
-        return KiteFigureEightEnv(config=cfg)
+        env = KiteFigureEightEnv(config=cfg)
+        return env if report_dir is None else _reporting(env, report_dir)
 
     return thunk
 
 
+def _report_failure(report_dir: Path, exc) -> None:
+    import os
+    import pickle
+
+    report_dir.mkdir(parents=True, exist_ok=True)
+    tmp = report_dir / f"{os.getpid()}.tmp"
+    tmp.write_bytes(pickle.dumps(exc))
+    tmp.replace(report_dir / f"{os.getpid()}.pkl")  # whole or not at all
+
+
+def _reporting(env, report_dir: Path):
+    """``env`` in a ``gymnasium.Wrapper`` whose ``step`` and ``reset`` write a NumericalFailure to ``report_dir``
+    (:func:`_report_failure`) before raising it on."""
+    import gymnasium as gym
+
+    from kite_env.dynamics.simulator import NumericalFailure
+
+    class ReportNumericalFailure(gym.Wrapper):
+        def step(self, action):
+            try:
+                return self.env.step(action)
+            except NumericalFailure as exc:
+                _report_failure(report_dir, exc)
+                raise
+
+        def reset(self, **kwargs):
+            try:
+                return self.env.reset(**kwargs)
+            except NumericalFailure as exc:
+                _report_failure(report_dir, exc)
+                raise
+
+    return ReportNumericalFailure(env)
+
+
+def _worker_failure(report_dir: Path):
+    """The NumericalFailure a ``subproc`` worker wrote before it ended (the first, by time), or None; the folder is
+    removed."""
+    import pickle
+    import shutil
+
+    files = sorted(report_dir.glob("*.pkl"), key=lambda f: f.stat().st_mtime) if report_dir.is_dir() else []
+    exc = pickle.loads(files[0].read_bytes()) if files else None
+    shutil.rmtree(report_dir, ignore_errors=True)
+    return exc
+
+
+def _close(venv) -> None:
+    """Close ``venv``; a ``subproc`` VecEnv whose worker has ended cannot be closed by SB3 (it waits on the dead
+    worker's pipe): its processes are then terminated."""
+    try:
+        venv.close()
+    except (EOFError, OSError):
+        inner = venv.unwrapped
+        for proc in getattr(inner, "processes", []):
+            if proc.is_alive():
+                proc.terminate()
+            proc.join(timeout=10)
+        for remote in getattr(inner, "remotes", []):
+            remote.close()
+        inner.closed = True
+
+
 def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: str, training: bool = True,
-             monitor_file: Path | None = None, append: bool = False):
+             monitor_file: Path | None = None, append: bool = False, report_dir: Path | None = None):
     """``n_envs`` envs of ``cfg`` as a ``kind`` VecEnv (``VEC_ENVS``) seeded ``seed + i``, in ``VecMonitor`` (writing
-    ``monitor_file``, appended to with ``append``) and, with ``normalize``, ``VecNormalize``."""
+    ``monitor_file``, appended to with ``append``) and, with ``normalize``, ``VecNormalize``; ``subproc`` workers
+    report a NumericalFailure into ``report_dir`` (:func:`_make_env`)."""
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
@@ -155,8 +229,10 @@ def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: s
         except ValueError as exc:  # not the surrogate fidelity, or sim.surrogate_fallback
             raise UsageError(f"--vec-env batched: {exc}") from None
     else:
-        fns = [_make_env(cfg) for _ in range(n_envs)]
-        venv = SubprocVecEnv(fns) if kind == "subproc" else DummyVecEnv(fns)
+        if kind == "subproc":
+            venv = SubprocVecEnv([_make_env(cfg, report_dir) for _ in range(n_envs)])
+        else:
+            venv = DummyVecEnv([_make_env(cfg) for _ in range(n_envs)])
     venv.seed(seed)  # env i: reset(seed=seed + i) at the first reset
     if monitor_file is not None and append and monitor_file.is_file():
         venv = VecMonitor(venv)  # continue the run's monitor file (the column t restarts at 0 in a resumed run)
@@ -238,8 +314,10 @@ def train(args) -> Path:
                                                       "vec_env": kind, "hyperparameters": hp}, sort_keys=False))
         (out / "command.txt").write_text(" ".join(shlex.quote(a) for a in ["kite-train", *sys.argv[1:]]) + "\n")
     gamma = float(hp.get("gamma", 0.99))
+    report_dir = out / WORKER_FAILURES
+    _worker_failure(report_dir)  # (a report left by an earlier run that was killed: dropped)
     venv = _vec_env(cfg, n_envs, args.seed, bool(hp["normalize"]), gamma, kind, monitor_file=out / "monitor.csv",
-                    append=latest is not None)
+                    append=latest is not None, report_dir=report_dir)
     # held-out episodes in the same randomised conditions (one env; batched stays batched, one kite)
     eval_env = _vec_env(cfg, 1, args.seed + EVAL_SEED_OFFSET, bool(hp["normalize"]), gamma,
                         "batched" if kind == "batched" else "dummy", training=False)
@@ -300,8 +378,14 @@ def train(args) -> Path:
     except NumericalFailure:  # a bug of the simulator (the wing with inertia): keep what was learnt, then report
         save_checkpoint("numerical failure")
         raise
+    except (EOFError, ConnectionError) as exc:  # a subproc worker ended: with a NumericalFailure it reported, as above
+        failure = _worker_failure(report_dir)
+        if failure is None:
+            raise
+        save_checkpoint("numerical failure")
+        raise failure from exc
     finally:
-        venv.close()
+        _close(venv)
         eval_env.close()
     model.save(out / "model.zip")
     if hp["normalize"]:
