@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, project_constraints
+from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, project_constraints, reel_out_speed
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.fsi import WingSolution
@@ -404,8 +404,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
         else:
             rp, vp = rs, vn
         if winch[0] > 0.0:  # the reel-out speed of the next step
-            v_set = min(max((tether[k] - winch[1]) / winch[2], 0.0), winch[3])
-            reel_speed[k] = v_set + (ld - v_set) * math.exp(-dt / winch[4])
+            reel_speed[k] = reel_out_speed(tether[k], ld, dt, winch[1], winch[2], winch[3], winch[4])
         for i in range(5):
             for c in range(3):
                 r[k, i, c] = rp[i, c]

@@ -40,6 +40,16 @@ from kite_env.structure.kernels import njit
 
 _JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
+
+@njit(**_JIT)
+def reel_out_speed(tether_force, speed, dt, force_limit, damping, speed_max, time_constant):
+    """The ground station's reel-out speed for the next step (``dynamics.winch = "force"``) from the last step's tether
+    force and speed: the set speed ``clip((F_t - F_set) / c_w, 0, v_max)``, followed with the time constant ``tau``
+    (the exact first-order lag over ``dt``). Used by :meth:`kite_env.dynamics.simulator.FlightSimulator._winch` and
+    the fast fidelity's step (:func:`kite_env.dynamics.fast.step_kites`)."""
+    v_set = min(max((tether_force - force_limit) / damping, 0.0), speed_max)
+    return v_set + (speed - v_set) * math.exp(-dt / time_constant)
+
 # row indices of the state arrays (particles.A ... KCU; literals because numba's cache is keyed on this file only)
 _A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
 

@@ -18,13 +18,12 @@ reproducible bit for bit and the wing's warm start sees equal steps.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from kite_env.config import Config
-from kite_env.dynamics.kernels import particle_accelerations, project_constraints
+from kite_env.dynamics.kernels import particle_accelerations, project_constraints, reel_out_speed
 from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame, kite_frame_rates
@@ -401,8 +400,8 @@ class FlightSimulator:
         d = self.cfg.dynamics
         if d.winch == "fixed":
             return
-        v_set = min(max((F_t - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
-        self.reel_speed = v_set + (self.reel_speed - v_set) * math.exp(-dt / d.winch_time_constant_s)
+        self.reel_speed = float(reel_out_speed(F_t, self.reel_speed, dt, d.winch_force_N, d.winch_damping_Ns_per_m,
+                                               d.winch_speed_max_mps, d.winch_time_constant_s))
 
 
 def _frame(r: np.ndarray):
