@@ -80,11 +80,9 @@ def test_resume_continues_from_the_last_checkpoint(tmp_path):
 
 
 @pytest.mark.slow  # the FE model: ~15-35 s
-def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(tmp_path, capsys, monkeypatch):
-    """A NumericalFailure of the wing with inertia during training (forced at the env's 25th step) is reported as
-    one error line with the failure's message, exit 3, after a checkpoint of what was learnt; --resume continues."""
-    from stable_baselines3 import PPO
-
+def _failing_step(at_call: int, t: float):
+    """``KiteFigureEightEnv.step`` that raises a forced NumericalFailure at time ``t`` on its ``at_call``-th call (per
+    process), and the original step."""
     from kite_env.dynamics.simulator import NumericalFailure, SimulationError
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
@@ -93,11 +91,22 @@ def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(
 
     def failing(self, action):
         calls[0] += 1
-        if calls[0] == 25:
+        if calls[0] == at_call:
             raise NumericalFailure(SimulationError("wing did not converge", "test: forced", "residual history (test)"),
-                                   0.5, "test conditions")
+                                   t, "test conditions")
         return step(self, action)
 
+    return failing, step
+
+
+def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(tmp_path, capsys, monkeypatch):
+    """A NumericalFailure of the wing with inertia during training (forced at the env's 25th step) is reported as
+    one error line with the failure's message, exit 3, after a checkpoint of what was learnt; --resume continues."""
+    from stable_baselines3 import PPO
+
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    failing, step = _failing_step(25, 0.5)
     monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
     out = tmp_path / "run"
     hp = _hp(tmp_path, "ppo")
@@ -122,22 +131,13 @@ def test_a_numerical_failure_in_a_subproc_worker_saves_a_checkpoint_and_exits_3(
     continues."""
     import stable_baselines3.common.vec_env as sb3_vec
 
-    from kite_env.dynamics.simulator import NumericalFailure, SimulationError
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
     class ForkedSubprocVecEnv(sb3_vec.SubprocVecEnv):
         def __init__(self, env_fns, start_method=None):
             super().__init__(env_fns, start_method="fork")
 
-    step = KiteFigureEightEnv.step
-    calls = [0]
-
-    def failing(self, action):
-        calls[0] += 1
-        if calls[0] == 13:
-            raise NumericalFailure(SimulationError("wing did not converge", "test: forced", "residual history (test)"),
-                                   0.26, "test conditions")
-        return step(self, action)
+    failing, step = _failing_step(13, 0.26)
 
     monkeypatch.setattr(sb3_vec, "SubprocVecEnv", ForkedSubprocVecEnv)
     monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
