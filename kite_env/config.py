@@ -562,3 +562,78 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = ()) -
             raise ConfigError(f"config file '{p}' is not valid YAML: {exc}") from None
         cfg = config_from_dict(data, cfg)
     return config_from_dict(parse_overrides(overrides), cfg)
+
+
+# ---------------------------------------------------------------------------------------------------- model identity
+#: the sections that define the flying model: geometry, structure, aerodynamics, particle system and ground station,
+#: controllers and actuator. ``fsi`` (solver tolerances), ``sim`` (run length, fidelity), ``wind``, ``trajectory``
+#: and ``env`` (the task) are not the model: a reduced-order wing or an agent made on one model is used with any of
+#: them.
+MODEL_SECTIONS = ("kite", "structure", "aero", "dynamics", "control")
+
+#: named models: each pins the model sections it changes from the defaults (dm_control's named constructors;
+#: ``configs/<name>.yaml`` holds the same values for the command line). ``default``: the flying model.
+#: ``paper``: every choice Bosch et al. state that the 60 s baseline flies with (configs/paper.yaml says which).
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    "default": {},
+    "paper": {
+        "structure": {"dynamic": False, "membrane_kinematics": "von_karman"},
+        "aero": {"moment_chord_power": 1.0, "canopy_luffing": False, "negative_alpha": "breukels"},
+        "dynamics": {"tether": "rod", "winch": "fixed"},
+        "control": {"k3i_per_s": 0.0, "line_speed_max_mps": 0.0},
+    },
+}
+
+
+class ModelMismatch(ConfigError):
+    """An artefact (reduced-order wing, start table, agent) made with another model than the one asked for."""
+
+
+def model_keys(cfg: Config) -> dict[str, Any]:
+    """Every key of :data:`MODEL_SECTIONS` as ``{"section.key": value}``."""
+    d = cfg.to_dict()
+    return {f"{s}.{k}": v for s in MODEL_SECTIONS for k, v in d[s].items()}
+
+
+def preset_config(name: str) -> Config:
+    """The configuration of the named model (:data:`PRESETS`)."""
+    if name not in PRESETS:
+        raise ConfigError(f"unknown model preset {name!r} (valid: {', '.join(PRESETS)})")
+    return config_from_dict(PRESETS[name], Config())
+
+
+def preset_name(cfg: Config) -> str:
+    """The name of the preset whose model ``cfg`` is, or ``custom``."""
+    keys = model_keys(cfg)
+    for name in PRESETS:
+        if model_keys(preset_config(name)) == keys:
+            return name
+    return "custom"
+
+
+def fingerprint(cfg: Config) -> dict[str, Any]:
+    """The model ``cfg`` flies: ``{"preset", "fingerprint", "keys"}``, the fingerprint the first 16 hex digits of the
+    SHA-256 of the model keys (:func:`model_keys`) as sorted JSON. Stored with every artefact made from a model."""
+    import hashlib
+    import json
+
+    keys = model_keys(cfg)
+    digest = hashlib.sha256(json.dumps(keys, sort_keys=True, default=repr).encode()).hexdigest()[:16]
+    return {"preset": preset_name(cfg), "fingerprint": digest, "keys": keys}
+
+
+def check_model(record: dict | None, cfg: Config, what: str) -> None:
+    """Raise :class:`ModelMismatch` naming the keys that differ when ``record`` (a :func:`fingerprint` stored with
+    ``what``) is not the model of ``cfg``; a record without one is refused too (made before models were recorded)."""
+    if not record or "keys" not in record:
+        raise ModelMismatch(f"{what} records no model (made before models were recorded); make it again for this "
+                            f"model")
+    now = model_keys(cfg)
+    old = record["keys"]
+    diff = sorted(k for k in set(now) | set(old) if now.get(k, "<absent>") != old.get(k, "<absent>"))
+    if diff:
+        shown = ", ".join(f"{k} ({old.get(k, '<absent>')!r} there, {now.get(k, '<absent>')!r} here)"
+                          for k in diff[:8])
+        more = f" and {len(diff) - 8} more" if len(diff) > 8 else ""
+        raise ModelMismatch(f"{what} was made with model '{record.get('preset', '?')}' ({record.get('fingerprint')}), "
+                            f"not this one '{preset_name(cfg)}': {len(diff)} key(s) differ: {shown}{more}")

@@ -259,11 +259,35 @@ def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
 
 
 @njit(**_JIT)
+def history_inputs(x, z, sel):
+    """The latent state's inputs of the reduced-order wing (:mod:`kite_env.surrogate.fit`): ``x[30 + j n + i] =
+    z[j, i] - x[sel[i]]`` for the filters ``z`` (n_tau, n) of the inputs ``sel`` (n,); nothing without filters."""
+    n = sel.shape[0]
+    for j in range(z.shape[0]):
+        for i in range(n):
+            x[30 + j * n + i] = z[j, i] - x[sel[i]]
+
+
+@njit(**_JIT)
+def latent_update(x, z, sel, gain, reset):
+    """One physics step of the latent low-pass filters: ``z <- z + c (x[sel] - z)`` with ``c = gain[j]`` (the exact
+    discrete first-order filter, :func:`kite_env.surrogate.fit.filter_gain`), or ``z <- x[sel]`` (``reset``: a
+    steady start)."""
+    for j in range(z.shape[0]):
+        for i in range(sel.shape[0]):
+            if reset:
+                z[j, i] = x[sel[i]]
+            else:
+                z[j, i] += gain[j] * (x[sel[i]] - z[j, i])
+
+
+@njit(**_JIT)
 def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp, n_modes, W0, b0, W1, b1,
-                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status):
-    """Inputs ``X`` (n, 30), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3), its turbulent part at the
+                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status, Z, sel, gain):
+    """Inputs ``X`` (n, n_in), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3), its turbulent part at the
     masses and the frame origin ``turb`` (n, 6, 3) and frame K (n, 3, 3) of every ``active`` kite at its time ``t``
-    (n,) and state ``r``, ``v`` (n, 5, 3), with its bridle lines and status (as :func:`step_kites`)."""
+    (n,) and state ``r``, ``v`` (n, 5, 3), with its bridle lines and status (as :func:`step_kites`); the latent
+    filters ``Z`` (n, n_tau, n_sel) start at these inputs (a steady start)."""
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
     t_buf = np.empty(1)
@@ -275,6 +299,8 @@ def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, o
             continue
         kite_inputs(t[k], r[k], v[k], q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k], amp[k],
                     n_modes, X[k], wind[k], R[k], pos, w6, t_buf, turb[k], False)
+        latent_update(X[k], Z[k], sel, gain, True)
+        history_inputs(X[k], Z[k], sel)
         mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         finite = True
@@ -330,7 +356,7 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
                tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether,
-               tension, length, status):
+               tension, length, status, Z, sel, gain):
     """One RK4 step of ``dt`` for every ``active`` kite, in place (:class:`SurrogateKites.step`).
 
     Stage 1 uses ``Y`` and ``wind`` of the current states (the end of the last step); stages 2-4 evaluate the wing
@@ -345,6 +371,9 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     The ground station (``dynamics.winch``, :meth:`kite_env.dynamics.simulator.FlightSimulator._winch`): each kite's
     tether length ``tether_length`` (n,) grows within the step at its reel-out speed ``reel_speed`` (n,), held over
     the step; after it the speed follows the step's tether force, ``winch = (on, F_set, c_w, v_max, tau)``.
+
+    The reduced-order wing's latent filters ``Z`` (n, n_tau, n_sel) of the inputs ``sel`` (gains ``gain``) are held
+    over the stages and updated with the inputs at the end of the step (:func:`latent_update`).
     """
     pos = np.empty((6, 3))
     w6 = np.empty((6, 3))
@@ -355,7 +384,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     F0 = np.empty((4, 3))
     zero_q = np.zeros((4, 3))
     zero_K = np.zeros((12, 12))
-    xs = np.empty(X.shape[1])
+    xs = np.empty(X.shape[1])  # the stage's inputs (with the latent state's)
     ys = np.empty(Y.shape[1])
     ws = np.empty((5, 3))
     Rs = np.empty((3, 3))
@@ -386,6 +415,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
             vs = kv[st]
             kite_inputs(t[k] + h, rs, vs, q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k],
                         amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf, turb[k], True)
+            history_inputs(xs, Z[k], sel)
             mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, h2, ys)
             _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
                            line_diameter, tether_diameter, l0 + h * ld, ld, tip_lengths, pair_damping[k], gravity,
@@ -411,6 +441,8 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                 v[k, i, c] = vp[i, c]
         kite_inputs(t[k], r[k], v[k], q_design, wind_f[k], wind_i[k], wavevec_t[k], phase0[k], omega_m[k], amp[k],
                     n_modes, X[k], wind[k], R[k], pos, w6, t_buf, turb[k], False)
+        latent_update(X[k], Z[k], sel, gain, False)
+        history_inputs(X[k], Z[k], sel)
         mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         status[k] = _status(ok, X[k], Y[k], lo, hi)
@@ -473,7 +505,12 @@ class SurrogateKites:
         self.t = np.zeros(n)
         self.rest = np.full((n, 4), float(dyn.power_line_length_m))
         self.pair_damping = np.zeros((n, 4))
-        self.X = np.zeros((n, 30))
+        self.n_in = len(surrogate.input_names)
+        self.X = np.zeros((n, self.n_in))
+        # the latent state of a wing with memory (kite_env.surrogate.fit): filters of the inputs sel, per kite
+        self._sel = np.array(surrogate.filtered, dtype=np.int64)
+        self._gain = np.array([1.0 - math.exp(-self.dt / tau) for tau in surrogate.taus])
+        self.Z = np.zeros((n, len(self._gain), len(self._sel)))
         self.Y = np.zeros((n, 17))
         self.R = np.zeros((n, 3, 3))
         self.wind = np.zeros((n, 5, 3))
@@ -521,14 +558,13 @@ class SurrogateKites:
         evaluate_kites(self.t, self.r, self.v, self.rest, self.q_design, self.wind_f, self.wind_i, self.wavevec_t,
                        self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights, self.k_c, self.c_c,
                        self._lo, self._hi, active, self.X, self.Y, self.wind, self.turb, self.R, self.tension,
-                       self.length, self.status)
+                       self.length, self.status, self.Z, self._sel, self._gain)
 
     def outside(self, k: int) -> list[str]:
         """Names of the inputs of kite ``k`` beyond the envelope."""
-        from kite_env.surrogate.samples import INPUT_NAMES
-
+        names = self.surrogate.input_names
         x = self.X[k]
-        return [INPUT_NAMES[i] for i in np.flatnonzero((x < self._lo) | (x > self._hi))]
+        return [names[i] for i in np.flatnonzero((x < self._lo) | (x > self._hi))]
 
     def step(self, L_B: np.ndarray, L_D: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
         """Advance every ``active`` (default all) kite by ``dt`` with steering-line rest lengths ``L_B``, ``L_D``
@@ -546,7 +582,7 @@ class SurrogateKites:
                    self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d,
                    self.tether_length, self.reel_speed, self._winch, self.tip_lengths, self.g, self.baumgarte,
                    self._lo, self._hi, self.X, self.Y, self.wind, self.turb, self.R, self.tether_force, self.tension,
-                   self.length, self.status)
+                   self.length, self.status, self.Z, self._sel, self._gain)
         return self.status
 
 
@@ -647,6 +683,9 @@ class SurrogateFlightSimulator(FlightSimulator):
 
             surrogate = load_default(cfg.kite.name)
         self.surrogate = surrogate
+        # a wing fitted to the wing with inertia carries the effective force on Table 1's point masses and flies
+        # without the quasi-static wing's tip dampers (kite_env.surrogate.fit)
+        self.particle_wing = not surrogate.inertial
         self.start_table = start_table
         if start_table is None and start != "fe":
             self.start_table = _default_start_table(cfg, surrogate_path)
@@ -677,7 +716,8 @@ class SurrogateFlightSimulator(FlightSimulator):
         (:class:`SimulationError` "no tabulated start"; the environment then draws another start)."""
         if self.start_mode in ("table", "table_only"):
             try:
-                return self.start_table.lookup(np.asarray(X.v_kite) - np.asarray(X.v_wind))
+                q0, F_b, k_pairs = self.start_table.lookup(np.asarray(X.v_kite) - np.asarray(X.v_wind))
+                return q0, F_b, (k_pairs if self.particle_wing else np.zeros_like(k_pairs))
             except ValueError as exc:
                 if self.start_mode == "table_only":
                     raise SimulationError("no tabulated start", str(exc)) from None

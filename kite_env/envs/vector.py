@@ -46,7 +46,7 @@ from kite_env.flight import GROUND_ELEVATION_RAD
 #: per-kite rows of SurrogateKites copied from a single env's simulator after its reset
 _KITE_ROWS = ("r", "v", "t", "rest", "pair_damping", "wind_f", "wind_i", "wavevec_t", "phase0", "omega_m", "amp",
               "X", "Y", "wind", "turb", "R", "tension", "length", "tether_force", "tether_length", "reel_speed",
-              "status")
+              "status", "Z")
 #: rows an observation needs (kept from before a physics step that fails)
 _OBS_ROWS = ("r", "v", "t", "R", "X", "tension", "length", "tether_force")
 _REASONS = (None, "ground", "slack tether", "non-finite particle state", "outside surrogate envelope",

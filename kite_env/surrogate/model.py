@@ -53,9 +53,34 @@ class SurrogateWing:
     def __post_init__(self):
         if len(self.weights) != len(self.biases) or not self.weights:
             raise ValueError("a SurrogateWing needs one bias per weight matrix and at least one layer")
-        if self.weights[0].shape[0] != len(INPUT_NAMES) or self.weights[-1].shape[1] != len(OUTPUT_NAMES):
-            raise ValueError(f"layer shapes {[w.shape for w in self.weights]} do not map {len(INPUT_NAMES)} inputs "
+        n_in = len(self.input_names)
+        if self.weights[0].shape[0] != n_in or self.weights[-1].shape[1] != len(OUTPUT_NAMES):
+            raise ValueError(f"layer shapes {[w.shape for w in self.weights]} do not map {n_in} inputs "
                              f"to {len(OUTPUT_NAMES)} outputs")
+
+    @property
+    def taus(self) -> tuple[float, ...]:
+        """Time constants [s] of the latent low-pass filters (:mod:`kite_env.surrogate.fit`); () for a memoryless
+        wing (the quasi-static wing's)."""
+        return tuple(float(t) for t in self.meta.get("history", {}).get("taus_s", ()))
+
+    @property
+    def filtered(self) -> tuple[int, ...]:
+        """Indices of the filtered inputs among :data:`INPUT_NAMES`."""
+        return tuple(int(i) for i in self.meta.get("history", {}).get("filtered", ()))
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The MLP's inputs: :data:`INPUT_NAMES`, then for each time constant the filtered inputs minus the current
+        ones."""
+        return INPUT_NAMES + tuple(f"{INPUT_NAMES[i]}_lag{int(round(1000 * tau))}ms" for tau in self.taus
+                                   for i in self.filtered)
+
+    @property
+    def inertial(self) -> bool:
+        """Fitted to the wing with inertia: its outputs are the effective wing force on Table 1's point masses at
+        A-D (:mod:`kite_env.surrogate.fit`), flown without the tip dampers of the quasi-static wing."""
+        return bool(self.meta.get("history", {}).get("inertial", False))
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """Outputs (n, 17) for inputs (n, 30) (or (17,) for (30,))."""
@@ -77,10 +102,11 @@ class SurrogateWing:
         return (self.x_min - margin * span - ENVELOPE_FLOOR, self.x_max + margin * span + ENVELOPE_FLOOR)
 
     def outside(self, x: np.ndarray, margin: float = 0.1) -> list[str]:
-        """Names of the inputs of one query ``x`` (30,) beyond :meth:`envelope`."""
+        """Names of the inputs of one query ``x`` beyond :meth:`envelope`."""
         x = np.asarray(x, dtype=float)
         lo, hi = self.envelope(margin)
-        return [INPUT_NAMES[i] for i in np.flatnonzero((x < lo) | (x > hi))]
+        names = self.input_names
+        return [names[i] for i in np.flatnonzero((x < lo) | (x > hi))]
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -88,7 +114,7 @@ class SurrogateWing:
         arrays.update({f"b{i}": b.astype(np.float32) for i, b in enumerate(self.biases)})
         np.savez_compressed(path, **arrays, x_mean=self.x_mean, x_std=self.x_std, y_mean=self.y_mean,
                             y_std=self.y_std, x_min=self.x_min, x_max=self.x_max, meta=json.dumps(self.meta),
-                            input_names=np.array(INPUT_NAMES), output_names=np.array(OUTPUT_NAMES))
+                            input_names=np.array(self.input_names), output_names=np.array(OUTPUT_NAMES))
         return path
 
     @classmethod
@@ -101,13 +127,14 @@ class SurrogateWing:
         except (OSError, ValueError) as exc:
             raise ValueError(f"surrogate weights '{path}' are not a readable .npz file: {exc}") from None
         with z:
-            if tuple(z["input_names"]) != INPUT_NAMES or tuple(z["output_names"]) != OUTPUT_NAMES:
-                raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
             n = sum(1 for k in z.files if k.startswith("W"))
             W = [z[f"W{i}"].astype(float) for i in range(n)]
             b = [z[f"b{i}"].astype(float) for i in range(n)]
-            return cls(W, b, z["x_mean"], z["x_std"], z["y_mean"], z["y_std"], z["x_min"], z["x_max"],
-                       json.loads(str(z["meta"])))
+            sw = cls(W, b, z["x_mean"], z["x_std"], z["y_mean"], z["y_std"], z["x_min"], z["x_max"],
+                     json.loads(str(z["meta"])))
+            if tuple(z["input_names"]) != sw.input_names or tuple(z["output_names"]) != OUTPUT_NAMES:
+                raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
+            return sw
 
 
 def output_errors(y_true: np.ndarray, y_pred: np.ndarray) -> dict:

@@ -1,0 +1,205 @@
+"""Fit the reduced-order wing of the wing with inertia to recorded flights (:mod:`kite_env.surrogate.trajectories`).
+
+The fast fidelity keeps the paper's particle system (Sect. II.C: A, B, C, D with Table 1's point masses, the KCU, the
+bridle lines, the tether and the tip constraints) and replaces the FE wing by a learned force on A-D. For the wing
+with inertia that force is the *effective* wing force: whatever makes Table 1's point masses at A-D move as the FE
+wing's nodes A-D move,
+
+    F_wing,i = m_i a_i - f_i(r, v, wind)        (i = A, B, C, D),
+
+with ``a_i`` the FE wing's node accelerations and ``f_i`` the particle system's applied forces without the wing
+(bridle lines, Eq. 10; their drag, Eq. 11; gravity; :meth:`ParticleSystem.forces`). It holds the aerodynamic load,
+the pull of the rest of the wing's structure and the inertia of its distributed and added mass. The tip constraints'
+forces lie along A-B and C-D; the FE wing's tips keep their lengths to within millimetres, so the constrained fast
+model reproduces these accelerations with multipliers near zero.
+
+The wing with inertia answers with a lag (its structure and added mass, a 4 Hz lowest mode): the force at a time
+depends on the recent motion. The reduced-order wing carries that memory as a small latent state: first-order
+low-pass filters of its inputs with time constants :data:`TAUS` (a Laguerre/Wiener-type model: linear filters of
+the input followed by a static nonlinearity, Wahlberg, "System identification using Laguerre models", IEEE TAC
+36(5), 1991), updated once per physics step, exactly as :func:`latent_update` does in the flight kernel. Its MLP sees
+the current inputs (:data:`kite_env.surrogate.samples.INPUT_NAMES`, frame K) and, for each time constant, the
+difference between the filtered inputs :data:`FILTERED` and their current values.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES
+
+#: time constants of the latent low-pass filters [s]
+TAUS = (0.05, 0.25)
+#: the inputs that are filtered: the bridle points' deformation, the apparent velocity and the rotation rate
+FILTERED = tuple(list(range(12)) + list(range(24, 30)))
+
+
+def history_names(taus=TAUS) -> tuple[str, ...]:
+    return tuple(f"{INPUT_NAMES[i]}_lag{int(round(1000 * tau))}ms" for tau in taus for i in FILTERED)
+
+
+def filter_gain(dt: float, tau: float) -> float:
+    """Gain of the exact discrete first-order low-pass over one step: ``z <- z + c (x - z)``, ``c = 1 - exp(-dt/tau)``."""
+    return 1.0 - math.exp(-dt / tau)
+
+
+def latent_features(X: np.ndarray, dt: float, taus=TAUS) -> np.ndarray:
+    """History inputs (n, len(taus) * len(FILTERED)) along one recorded flight ``X`` (n, 30): per step the filters are
+    updated with the new inputs, then ``z - x``; the filters start at the first row's inputs (a steady start)."""
+    sel = np.asarray(FILTERED)
+    out = np.empty((len(X), len(taus) * len(sel)))
+    for j, tau in enumerate(taus):
+        c = filter_gain(dt, tau)
+        z = X[0, sel].copy()
+        for k in range(len(X)):
+            z += c * (X[k, sel] - z)
+            out[k, j * len(sel):(j + 1) * len(sel)] = z - X[k, sel]
+    return out
+
+
+def tape_samples(arrays: dict, cfg, q_design: np.ndarray, tip_lengths, accel: str = "central"):
+    """Inputs (n, 30) and outputs (n, 17) along one tape, and the rows where both are defined.
+
+    ``accel``: the accelerations of A-D in the effective force, ``"wing"`` the FE wing's own (generalized-alpha,
+    end of the step; it carries the numerical oscillation of the scheme), ``"central"`` the central difference of
+    the recorded velocities over two steps (what the fast model's RK4 integrates; default)."""
+    from kite_env.dynamics.fast import kite_inputs
+    from kite_env.dynamics.particles import ParticleSystem
+
+    n = len(arrays["t"])
+    dt = cfg.dynamics.dt_s
+    ps = ParticleSystem(cfg.dynamics, tip_lengths, np.zeros(4), cfg.aero.rho_kg_m3)
+    X = np.zeros((n, 30))
+    Y = np.full((n, 17), np.nan)
+    wf, wi = np.zeros(9), np.zeros(2, dtype=np.int64)
+    wv, ph, om, amp = np.zeros((3, 3)), np.zeros(3), np.zeros(3), np.zeros(3)
+    wind5, R, pos, w6, t_buf = np.empty((5, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((6, 3)), np.empty(1)
+    r, v, wind = arrays["r"], arrays["v"], arrays["wind"]
+    if accel == "wing":
+        a = arrays["a"]
+    else:
+        a = np.full_like(v, np.nan)
+        a[1:-1] = (v[2:] - v[:-2]) / (arrays["t"][2:] - arrays["t"][:-2])[:, None, None]
+    for k in range(n):
+        turb6 = np.ascontiguousarray(wind[k])
+        kite_inputs(float(arrays["t"][k]), r[k], v[k], q_design, wf, wi, wv, ph, om, amp, 1, X[k], wind5, R, pos,
+                    w6, t_buf, turb6, True)
+        ps.set_steering(float(arrays["rest"][k, 1]), float(arrays["rest"][k, 3]))
+        f, _ = ps.forces(r[k], v[k], wind[k, :5], np.zeros((4, 3)))
+        F_w = ps.m[:4, None] * a[k, :4] - f[:4]
+        Y[k, :12] = -(F_w @ R).ravel()  # the reaction F_b = -F_wing in K (the legacy layout: F_k = -F_b on A-D)
+        Y[k, 12:15] = arrays["alpha"][k]
+        Y[k, 15], Y[k, 16] = arrays["lift"][k], arrays["drag"][k]
+    ok = np.all(np.isfinite(X), axis=1) & np.all(np.isfinite(Y), axis=1)
+    return X, Y, ok
+
+
+@dataclass
+class FitData:
+    inputs: np.ndarray  # (n, 30 + history)
+    outputs: np.ndarray  # (n, 17)
+    group: np.ndarray  # (n,) episode index
+    meta: dict
+
+
+def build_dataset(tape_dir: str | Path, cfg, wing, taus=TAUS, accel: str = "central", every: int = 1,
+                  log=print) -> FitData:
+    """All tapes of ``tape_dir`` as one data set (every ``every``-th row; the history along every row)."""
+    from kite_env.config import check_model
+    from kite_env.surrogate.trajectories import load_tape
+
+    q0 = wing.design_bridle
+    tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
+    Xs, Ys, G, eps = [], [], [], []
+    t0 = time.perf_counter()
+    for path in sorted(Path(tape_dir).glob("ep_*.npz")):
+        if path.name.endswith(".part.npz"):
+            continue
+        arrays, meta = load_tape(path)
+        check_model(meta.get("model"), cfg, f"tape '{path}'")
+        X, Y, ok = tape_samples(arrays, cfg, q0, tips, accel)
+        H = latent_features(X, cfg.dynamics.dt_s, taus)
+        keep = ok.copy()
+        keep[np.arange(len(keep)) % every != 0] = False
+        Xs.append(np.hstack([X, H])[keep])
+        Ys.append(Y[keep])
+        G.append(np.full(int(keep.sum()), meta["plan"]["index"]))
+        eps.append({"index": meta["plan"]["index"], "policy": meta["plan"]["policy"], "end": meta["end"],
+                    "flown_s": meta["flown_s"], "wind_mps": meta["plan"]["wind_mps"]})
+    if not Xs:
+        raise FileNotFoundError(f"no tapes (ep_*.npz) in '{tape_dir}'")
+    log(f"{len(Xs)} tapes, {sum(len(x) for x in Xs)} rows in {time.perf_counter() - t0:.0f} s")
+    return FitData(np.vstack(Xs), np.vstack(Ys), np.concatenate(G),
+                   {"episodes": eps, "taus_s": list(taus), "accel": accel, "every": every})
+
+
+def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048, lr: float = 2e-3,
+            holdout: int = 5, seed: int = 0, log=print):
+    """Fit a tanh MLP (normalised inputs and outputs, Adam, mini-batches, the learning rate halved on a plateau of
+    the held-out loss; the epoch with the lowest held-out loss kept). Every ``holdout``-th episode is held out.
+    Returns ``(weights, biases, norms, report)``."""
+    import torch
+
+    torch.manual_seed(seed)
+    X, Y, g = data.inputs, data.outputs, data.group
+    val = (g % holdout) == holdout - 1
+    x_mean, x_std = X[~val].mean(0), X[~val].std(0) + 1e-6
+    y_mean, y_std = Y[~val].mean(0), Y[~val].std(0) + 1e-9
+    xt = torch.tensor((X - x_mean) / x_std, dtype=torch.float32)
+    yt = torch.tensor((Y - y_mean) / y_std, dtype=torch.float32)
+    sizes = [X.shape[1], *hidden, Y.shape[1]]
+    layers: list = []
+    for i in range(len(sizes) - 1):
+        layers.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(torch.nn.Tanh())
+    net = torch.nn.Sequential(*layers)
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=10)
+    vm = torch.from_numpy(val)
+    x_tr, y_tr, x_va, y_va = xt[~vm], yt[~vm], xt[vm], yt[vm]
+    gen = torch.Generator().manual_seed(seed)
+    best = (float("inf"), None, -1)
+    t0 = time.perf_counter()
+    for epoch in range(epochs):
+        order = torch.randperm(len(x_tr), generator=gen)
+        for k in range(0, len(x_tr), batch):
+            idx = order[k:k + batch]
+            opt.zero_grad()
+            loss = torch.mean((net(x_tr[idx]) - y_tr[idx]) ** 2)
+            loss.backward()
+            opt.step()
+        with torch.no_grad():
+            lv = float(torch.mean((net(x_va) - y_va) ** 2))
+        sched.step(lv)
+        if lv < best[0]:
+            best = (lv, [p.detach().clone() for p in net.parameters()], epoch)
+        if epoch % 10 == 0 or epoch == epochs - 1:
+            log(f"epoch {epoch:4d}  held-out loss {lv:.5f}  best {best[0]:.5f} ({best[2]})  "
+                f"lr {opt.param_groups[0]['lr']:.1e}  {time.perf_counter() - t0:.0f} s")
+        if opt.param_groups[0]["lr"] < lr / 64:
+            break
+    with torch.no_grad():
+        for p, b in zip(net.parameters(), best[1]):
+            p.copy_(b)
+        pred = net(x_va).numpy() * y_std + y_mean
+    W = [m.weight.detach().numpy().T.astype(np.float64) for m in net if isinstance(m, torch.nn.Linear)]
+    b = [m.bias.detach().numpy().astype(np.float64) for m in net if isinstance(m, torch.nn.Linear)]
+    from kite_env.surrogate.model import output_errors
+
+    report = output_errors(Y[val], pred)
+    report.update({"best_epoch": best[2], "held_out_loss": best[0], "fit_s": time.perf_counter() - t0,
+                   "n_train": int((~val).sum()), "n_val": int(val.sum()), "hidden": list(hidden), "seed": seed,
+                   "holdout": holdout, "epochs": epochs, "lr": lr, "batch": batch})
+    lo, hi = X[~val].min(0), X[~val].max(0)
+    return W, b, (x_mean, x_std, y_mean, y_std, lo, hi), report
+
+
+__all__ = ["FILTERED", "FitData", "TAUS", "build_dataset", "filter_gain", "fit_mlp", "history_names",
+           "latent_features", "tape_samples"]
+_ = OUTPUT_NAMES
