@@ -109,6 +109,19 @@ def model_algorithm(path: Path) -> str:
     raise PolicyError(f"model file '{path}': neither a PPO nor a SAC model")
 
 
+def model_record(path: Path) -> dict | None:
+    """The model an agent was trained on (:func:`kite_env.config.fingerprint`): the ``model.json`` of its
+    ``kite-train`` run folder (next to ``model.zip``, or one folder up for ``checkpoints/`` and ``eval/``)."""
+    for folder in (path.parent, path.parent.parent):
+        f = folder / "model.json"
+        if f.is_file():
+            try:
+                return json.loads(f.read_text())
+            except json.JSONDecodeError as exc:
+                raise PolicyError(f"'{f}' is not valid JSON: {exc}") from None
+    return None
+
+
 def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = None) -> ModelAgent:
     """Load ``path`` (PPO or SAC zip) for ``env``; the observation normalisation ``vecnormalize`` (default: a
     ``vecnormalize.pkl`` next to the model, if there is one) is applied to observations."""
@@ -123,6 +136,13 @@ def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = No
         model = cls.load(path, device="cpu")
     except Exception as exc:  # SB3 raises many kinds on a damaged file
         raise PolicyError(f"model file '{path}' could not be loaded as {algo.upper()}: {exc}") from None
+    record = model_record(path)
+    try:
+        from kite_env.config import ModelMismatch, check_model
+
+        check_model(record, env.cfg, f"agent '{path}'")
+    except ModelMismatch as exc:
+        raise PolicyError(str(exc)) from None
     if model.observation_space.shape != env.observation_space.shape:
         raise PolicyError(f"model '{path}' expects observations of shape {model.observation_space.shape}, the "
                           f"environment gives {env.observation_space.shape} (check env.observation in the config)")

@@ -294,7 +294,8 @@ class EnvConfig:
     slack_tether_N: float = 50.0  # a tether force below this ends the episode (slack tether) [N]
     wind_speed_min_mps: float = 5.0  # wind speed drawn uniformly per episode from [min, max] [m/s]
     wind_speed_max_mps: float = 5.0  # [m/s]
-    turbulence_intensity_max: float = 0.0  # turbulence intensity drawn uniformly from [0, max] per episode [-]
+    turbulence_intensity_min: float = 0.0  # turbulence intensity drawn uniformly from [min, max] per episode [-]
+    turbulence_intensity_max: float = 0.0  # [-]
     random_start: bool = False  # start at a random point of the figure-eight (else at the crossing, like kite-eval)
     # random starts only where the path's geodesic curvature |kappa_g| [1/rad] is at most this (the straight
     # segments through the crossing): the start has neutral steering and no turn rate, and from there a start in a
@@ -366,7 +367,7 @@ _NON_NEGATIVE = {
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
     "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.line_speed_max_mps", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
-    "env.wind_speed_max_mps", "env.turbulence_intensity_max",
+    "env.wind_speed_max_mps", "env.turbulence_intensity_min", "env.turbulence_intensity_max",
 }
 
 
@@ -432,12 +433,54 @@ def _parse_scalar(text: str) -> Any:
         return text
 
 
+#: quantities the environment draws per episode (``env.randomize``) and their ranges: a layer of configuration (a file,
+#: a dict, the overrides) that gives the quantity without its range pins the range to that value, so that the value
+#: given is the value flown (and a range stays optional)
+RANDOMISED = {
+    "wind.speed_mps": ("env.wind_speed_min_mps", "env.wind_speed_max_mps"),
+    "wind.turbulence_intensity": ("env.turbulence_intensity_min", "env.turbulence_intensity_max"),
+    "sim.initial_speed_mps": ("env.initial_speed_min_mps", "env.initial_speed_max_mps", "env.initial_speed_per_wind_min",
+                              "env.initial_speed_per_wind_max"),
+    "sim.initial_speed_per_wind": ("env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max"),
+}
+
+
+def _pins(data: dict) -> dict:
+    """The range keys that the layer ``data`` pins (:data:`RANDOMISED`)."""
+    given = {f"{s}.{k}" for s, v in data.items() if isinstance(v, dict) for k in v}
+    out: dict = {}
+    for key, ranges in RANDOMISED.items():
+        if key not in given or any(r in given for r in ranges):
+            continue
+        s, k = key.split(".")
+        value = data[s][k]
+        if key == "sim.initial_speed_mps":
+            try:
+                if float(value) <= 0.0:  # 0: the start speed scales with the wind (sim.initial_speed_per_wind)
+                    continue
+            except (TypeError, ValueError):
+                continue  # (the value's own check names it)
+            pinned = dict(zip(ranges, (value, value, 0.0, 0.0)))
+        else:
+            pinned = dict(zip(ranges, (value, value)))
+        for r, v in pinned.items():
+            rs, rk = r.split(".")
+            out.setdefault(rs, {})[rk] = v
+    return out
+
+
 def config_from_dict(data: dict[str, Any] | None, base: Config | None = None) -> Config:
-    """Build a validated Config from nested ``{section: {key: value}}`` on top of ``base`` (defaults if None)."""
+    """Build a validated Config from nested ``{section: {key: value}}`` on top of ``base`` (defaults if None); a
+    randomised quantity given without its range pins the range (:data:`RANDOMISED`)."""
     base = base or Config()
     data = data or {}
     if not isinstance(data, dict):
         raise ConfigError(f"config must be a mapping of sections, got {type(data).__name__}")
+    pins = _pins(data)
+    if pins:
+        data = {s: dict(v) if isinstance(v, dict) else v for s, v in data.items()}
+        for s, values in pins.items():
+            data.setdefault(s, {}).update(values)
     sections = {f.name: getattr(base, f.name) for f in fields(base)}
     for sec_name, values in data.items():
         if sec_name not in sections:
@@ -518,6 +561,7 @@ def _validate(cfg: Config) -> None:
                           "start speed [m/s] or its multiple of wind.speed_mps")
     env = cfg.env
     for lo, hi in (("wind_speed_min_mps", "wind_speed_max_mps"), ("initial_speed_min_mps", "initial_speed_max_mps"),
+                   ("turbulence_intensity_min", "turbulence_intensity_max"),
                    ("initial_speed_per_wind_min", "initial_speed_per_wind_max")):
         if getattr(env, lo) > getattr(env, hi):
             raise ConfigError(f"config key 'env.{lo}' must not exceed 'env.{hi}', got {getattr(env, lo)} > "
@@ -537,8 +581,14 @@ def _validate(cfg: Config) -> None:
 
 def parse_overrides(overrides: Iterable[str]) -> dict[str, dict[str, Any]]:
     """``["fsi.tol_disp_m=1e-5", ...]`` -> nested dict; malformed entries raise ConfigError."""
+    if isinstance(overrides, (str, bytes)) or not isinstance(overrides, Iterable) or isinstance(overrides, dict):
+        raise ConfigError(f"overrides must be a list of 'section.key=value' strings, got {type(overrides).__name__} "
+                          f"{overrides!r}" + (" (wrap a single override in a list)" if isinstance(overrides, str)
+                                              else ""))
     out: dict[str, dict[str, Any]] = {}
     for item in overrides:
+        if not isinstance(item, str):
+            raise ConfigError(f"override {item!r} must be a string 'section.key=value'")
         if "=" not in item:
             raise ConfigError(f"override '{item}' must look like section.key=value")
         lhs, rhs = item.split("=", 1)
@@ -560,6 +610,9 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = ()) -
             data = yaml.safe_load(p.read_text())
         except yaml.YAMLError as exc:
             raise ConfigError(f"config file '{p}' is not valid YAML: {exc}") from None
+        if isinstance(data, dict) and any(k == "default" or "-v" in str(k) for k in data):
+            raise ConfigError(f"config file '{p}' is a training recipe (keys {', '.join(sorted(map(str, data)))}), not "
+                              f"a physics config: give it to kite-train with --recipe")
         cfg = config_from_dict(data, cfg)
     return config_from_dict(parse_overrides(overrides), cfg)
 

@@ -95,19 +95,20 @@ def shipped_ppo(tmp_path_factory):
     hp.write_text(yaml.safe_dump({"default": {"n_steps": 8, "batch_size": 8, "n_epochs": 1, "checkpoint_freq": 10**6,
                                               "eval_freq": 10**6}}))
     run = base / "run"
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "16", "--out", str(run), "--config", str(hp),
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "16", "--out", str(run), "--recipe", str(hp),
                            "--fidelity", "surrogate", "--set", "env.max_episode_s=0.2",
                            "--set", "env.w_traction=0.3"]) == 0
     models = base / "models"
     (models / "ppo").mkdir(parents=True)
-    for name in ("model.zip", "vecnormalize.pkl", "config.yml"):
+    for name in ("model.zip", "vecnormalize.pkl", "config.yml", "model.json"):
         shutil.copy(run / name, models / "ppo" / name)
     return models
 
 
-def test_shipped_name_flies_the_model_with_its_config(shipped_ppo, tmp_path, monkeypatch):
-    """``--policy ppo`` loads agents/models/ppo/model.zip with its normalisation, and the environment is that of
-    the model's config.yml (surrogate fidelity, w_traction 0.3), --set on top."""
+def test_every_policy_flies_the_one_env_of_the_command(shipped_ppo, tmp_path, monkeypatch):
+    """``--policy ppo`` loads agents/models/ppo/model.zip with its normalisation; ``--compare`` flies it and every
+    other policy in the one env of --config and --set (not the config of the agent's training run), and the table
+    names that env."""
     import agents.policies
 
     monkeypatch.setattr(agents.policies, "MODELS_DIR", shipped_ppo)
@@ -117,18 +118,30 @@ def test_shipped_name_flies_the_model_with_its_config(shipped_ppo, tmp_path, mon
     assert agent.obs_norm is not None and agent.model.num_timesteps == 16
     assert agents.policies.policy_label("ppo") == "ppo"
     out = tmp_path / "cmp"
-    assert main(["--compare", "ppo", "random", "--duration", "0.1", "--set", "sim.warmup_s=0.02",
+    assert main(["--compare", "ppo", "random", "--episodes", "2", "--duration", "0.1", "--set", "sim.warmup_s=0.02",
                  "--fidelity", "surrogate", "--out", str(out), "--quiet"]) == 0
     m = json.loads((out / "ppo" / "metrics.json").read_text())
     assert m["policy"] == "ppo" and m["episode_rows"][0]["episode_steps"] <= 5
-    cfg = yaml.safe_load((out / "ppo" / "config.yaml").read_text())
-    assert cfg["sim"]["fidelity"] == "surrogate" and cfg["env"]["w_traction"] == 0.3
-    assert cfg["sim"]["duration_s"] == pytest.approx(0.1)
-    # the return is the sum of the reward terms with the model's weights
+    cfgs = [yaml.safe_load((out / name / "config.yaml").read_text()) for name in ("ppo", "random")]
+    assert cfgs[0] == cfgs[1] and cfgs[0]["sim"]["fidelity"] == "surrogate" and cfgs[0]["env"]["w_traction"] == 0.5
+    # the return is the sum of the reward terms with the env's weights
     r = m["episode_rows"][0]
     assert r["episode_return"] == pytest.approx(sum(v for k, v in r.items() if k.startswith("reward_")))
-    other = yaml.safe_load((out / "random" / "config.yaml").read_text())
-    assert other["env"]["w_traction"] == 0.5  # the default config, not the model's
+    md = (out / "compare.md").read_text().splitlines()
+    assert md[0].startswith("env KiteFigureEightFast-v1 (fidelity surrogate), model 'default' (")
+    assert "2 episode(s) of 0.1 s, seeds 0-1" in md[0]
+    assert md[2] == "| | ppo | random |"
+
+
+def test_an_agent_of_another_model_is_refused_naming_the_keys(shipped_ppo, tmp_path, capsys, monkeypatch):
+    import agents.policies
+
+    monkeypatch.setattr(agents.policies, "MODELS_DIR", shipped_ppo)
+    out = tmp_path / "x"
+    assert main(["--policy", "ppo", "--set", "control.delta_l_max_m=0.25", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "agent '" in err[0] and "control.delta_l_max_m (1.5 there, 0.25 here)" in err[0]
+    assert not out.exists()
 
 
 def test_out_is_a_file_or_missing(tmp_path, capsys):
@@ -261,10 +274,12 @@ def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
     # constant action, no turbulence: both episodes fly the same flight
     assert const["episode_rows"][0]["episode_return"] == const["episode_rows"][1]["episode_return"]
     md = (out / "compare.md").read_text().strip().splitlines()
-    assert md[0].startswith("| policy | episodes | return mean") and len(md) == 2 + 3
-    assert [ln.split("|")[1].strip() for ln in md[2:]] == ["random", "constant_0", first.name]
+    assert md[0].startswith("env KiteFigureEight-v1 (fidelity fe), model 'default' (") and "seeds 3-4" in md[0]
+    assert md[2] == f"| | random | constant_0 | {first.name} |"
+    body = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in md[4:]}
+    assert body["episodes"] == ["2", "2", "1"] and "+-" in body["return"][0] and "+-" not in body["return"][2]
     rows = (out / "compare.csv").read_text().strip().splitlines()
-    assert len(rows) == 4 and rows[0].startswith("policy,episodes,return mean")
+    assert len(rows) == 4 and rows[0].startswith("policy,episodes,crashed,end,episode_return_mean,episode_return_se")
 
 
 def test_a_random_episode_does_not_depend_on_the_episodes_before_it():

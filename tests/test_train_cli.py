@@ -7,12 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import LEGACY_CONFIG
-
 from kite_env.cli import train as train_cli
 
-AGENT_CONFIGS = sorted((Path(__file__).parents[1] / "configs" / "agents").glob("*.yaml"))
-SHORT = ["--set", "env.max_episode_s=0.4"]
+AGENT_CONFIGS = sorted((Path(__file__).parents[1] / "agents" / "recipes").glob("*.yaml"))
+SHORT = ["--fidelity", "fe", "--set", "env.max_episode_s=0.4"]
 
 
 @pytest.mark.parametrize("path", AGENT_CONFIGS, ids=[p.name for p in AGENT_CONFIGS])
@@ -38,7 +36,7 @@ def test_short_training_run_gives_a_loadable_model(tmp_path, algo):
     from kite_env.envs.figure_eight import KiteFigureEightEnv
 
     out = tmp_path / "run"
-    rc = train_cli.main(["--algo", algo, "--timesteps", "32", "--out", str(out), "--config", _hp(tmp_path, algo),
+    rc = train_cli.main(["--algo", algo, "--timesteps", "32", "--out", str(out), "--recipe", _hp(tmp_path, algo),
                          "--seed", "1", *SHORT])
     assert rc == 0
     for name in ("model.zip", "vecnormalize.pkl", "config.yml", "args.yml", "command.txt"):
@@ -68,12 +66,12 @@ def test_resume_continues_from_the_last_checkpoint(tmp_path):
 
     out = tmp_path / "run"
     hp = _hp(tmp_path, "ppo")
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "32", "--out", str(out), "--config", hp, *SHORT]) == 0
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "32", "--out", str(out), "--recipe", hp, *SHORT]) == 0
     assert (out / "checkpoints" / "model_32_steps.zip").is_file()
     assert (out / "checkpoints" / "model_vecnormalize_32_steps.pkl").is_file()
     # not empty: refuses without --resume
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, *SHORT]) == 2
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, "--resume",
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--recipe", hp, *SHORT]) == 2
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--recipe", hp, "--resume",
                            *SHORT]) == 0
     assert PPO.load(out / "model.zip", device="cpu").num_timesteps == 64
     assert (out / "checkpoints" / "model_64_steps.zip").is_file()
@@ -110,7 +108,7 @@ def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(
     monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
     out = tmp_path / "run"
     hp = _hp(tmp_path, "ppo")
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, *SHORT]) == 3
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--recipe", hp, *SHORT]) == 3
     err = capsys.readouterr().err
     line = [x for x in err.splitlines() if x.startswith("kite-train: error:")]
     assert len(line) == 1 and "numerical failure at t = 0.5000 s (test conditions): wing did not converge" in line[0]
@@ -118,7 +116,7 @@ def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(
     # the 24 steps made before the failing 25th are kept (the periodic checkpoint has 16), no final model
     assert (out / "checkpoints" / "model_24_steps.zip").is_file() and not (out / "model.zip").exists()
     monkeypatch.setattr(KiteFigureEightEnv, "step", step)
-    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, "--resume",
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--recipe", hp, "--resume",
                            *SHORT]) == 0
     assert "resuming from model_24_steps.zip" in capsys.readouterr().err
     assert PPO.load(out / "model.zip", device="cpu").num_timesteps >= 64  # (whole PPO rollouts of 16 from 24)
@@ -143,7 +141,7 @@ def test_a_numerical_failure_in_a_subproc_worker_saves_a_checkpoint_and_exits_3(
     monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
     out = tmp_path / "run"
     hp = _hp(tmp_path, "ppo")
-    args = ["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--config", hp, "--n-envs", "2",
+    args = ["--algo", "ppo", "--timesteps", "64", "--out", str(out), "--recipe", hp, "--n-envs", "2",
             "--vec-env", "subproc", *SHORT]
     assert train_cli.main(args) == 3
     err = capsys.readouterr().err
@@ -156,6 +154,49 @@ def test_a_numerical_failure_in_a_subproc_worker_saves_a_checkpoint_and_exits_3(
     monkeypatch.setattr(KiteFigureEightEnv, "step", step)
     assert train_cli.main([*args, "--resume"]) == 0
     assert "resuming from model_24_steps.zip" in capsys.readouterr().err and (out / "model.zip").is_file()
+
+
+def _one_error(capsys, *needles):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("kite-train: error:"), err
+    for n in needles:
+        assert n in err[0], (n, err[0])
+
+
+def test_recipe_mistakes_exit_2_with_one_line_before_anything_is_written(tmp_path, capsys):
+    """A misspelt argument, an unknown env id, a physics config given as the recipe and a recipe given as the
+    physics config: one line each, exit 2, no run folder."""
+    root = Path(__file__).parents[1]
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(yaml.safe_dump({"default": {"learning_rte": 1e-3}}))
+    wrong_id = tmp_path / "wrong_id.yaml"
+    wrong_id.write_text(yaml.safe_dump({"KiteFigureEightFast-v0": {"n_envs": 2}}))
+    cases = [(["--recipe", str(typo)], ("learning_rte", "did you mean 'learning_rate'")),
+             (["--recipe", str(wrong_id)], ("unknown env id 'KiteFigureEightFast-v0'", "KiteFigureEightFast-v1")),
+             (["--recipe", str(root / "configs" / "default.yaml")], ("is a physics config", "--config")),
+             (["--config", str(root / "agents" / "recipes" / "ppo.yaml")], ("is a training recipe", "--recipe"))]
+    for i, (extra, needles) in enumerate(cases):
+        out = tmp_path / f"run{i}"
+        assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(out), *extra]) == 2
+        _one_error(capsys, *needles)
+        assert not out.exists()
+
+
+def test_the_command_line_wins_over_the_recipe_and_pins_a_randomised_quantity(tmp_path):
+    """--set wind.speed_mps over a recipe that draws the wind from a range: the range becomes that value (the value
+    given is the value flown); a range given with --set stays a range."""
+    import argparse
+
+    def cfg_of(*sets):
+        args = argparse.Namespace(algo="ppo", recipe=None, config=None, set=list(sets), fidelity="surrogate")
+        return train_cli.training_config(args)[0]
+
+    base = cfg_of()
+    assert (base.env.wind_speed_min_mps, base.env.wind_speed_max_mps) == (4.0, 10.0)  # the shipped recipe's range
+    pinned = cfg_of("wind.speed_mps=8")
+    assert (pinned.wind.speed_mps, pinned.env.wind_speed_min_mps, pinned.env.wind_speed_max_mps) == (8.0, 8.0, 8.0)
+    ranged = cfg_of("wind.speed_mps=8", "env.wind_speed_max_mps=9")
+    assert (ranged.env.wind_speed_min_mps, ranged.env.wind_speed_max_mps) == (4.0, 9.0)
 
 
 def test_bad_input_is_one_clear_error(tmp_path, capsys):
@@ -176,9 +217,7 @@ def test_kite_bench_writes_bench_json(tmp_path, capsys):
 
     from kite_env.cli import bench
 
-    # the fast fidelities on the model their reduced-order wing was fitted to (configs/legacy_v0.yaml)
-    assert bench.main(["--out", str(tmp_path), "--steps", "10", "--fast-steps", "300", "--config",
-                       str(LEGACY_CONFIG)]) == 0
+    assert bench.main(["--out", str(tmp_path), "--steps", "10", "--fast-steps", "300"]) == 0
     data = json.loads((tmp_path / "bench.json").read_text())
     fe = data["fe"]
     assert fe["env_steps_per_s"] > 0 and fe["real_time_factor"] > 0 and fe["steps"] == 10
@@ -195,14 +234,14 @@ RECIPE_ENV = {"env.wind_speed_min_mps": 4.0, "env.wind_speed_max_mps": 9.0, "env
 
 
 def _recipe(tmp_path, algo, **extra):
-    """A recipe for KiteFigureEightFast-v0: 4 batched envs, the env overrides above, a tiny algorithm."""
+    """A recipe for KiteFigureEightFast-v1: 4 batched envs, the env overrides above, a tiny algorithm."""
     base = {"ppo": {"n_steps": 8, "batch_size": 16, "n_epochs": 1},
             "sac": {"learning_starts": 8, "batch_size": 8, "buffer_size": 1000}}[algo]
     f = tmp_path / f"recipe_{algo}.yaml"
     f.write_text(yaml.safe_dump({
         "default": {**base, "checkpoint_freq": 32, "eval_freq": 10**6, "env": {"env.w_traction": 0.25}},
-        "KiteFigureEight-v0": {"env": {"env.w_traction": 0.75}},
-        "KiteFigureEightFast-v0": {"n_envs": 4, "vec_env": "batched", "env": dict(RECIPE_ENV), **extra}}))
+        "KiteFigureEight-v1": {"env": {"env.w_traction": 0.75}},
+        "KiteFigureEightFast-v1": {"n_envs": 4, "vec_env": "batched", "env": dict(RECIPE_ENV), **extra}}))
     return str(f)
 
 
@@ -235,9 +274,11 @@ def test_shipped_recipes_give_the_training_conditions(path):
     hp = train_cli.load_hyperparameters(path, path.stem, train_cli.FAST_ENV_ID)
     assert hp["n_envs"] == 16 and hp["vec_env"] == "batched"
     env = load_config(None, train_cli.recipe_overrides(hp)).env
+    # the conditions the reduced-order wing was fitted in (kite_env.surrogate.trajectories.EpisodePlan)
     assert (env.wind_speed_min_mps, env.wind_speed_max_mps) == (4.0, 10.0)
-    assert env.turbulence_intensity_max == 0.15 and env.random_start is True and env.randomize is True
-    assert (env.initial_speed_min_mps, env.initial_speed_max_mps) == (18.0, 26.0)
+    assert env.turbulence_intensity_max == 0.1 and env.random_start is True and env.randomize is True
+    assert env.start_curvature_max == 1.0
+    assert (env.initial_speed_per_wind_min, env.initial_speed_per_wind_max) == (4.0, 4.8)
 
 
 def test_vec_env_kind_defaults_and_errors(tmp_path, capsys):
@@ -247,7 +288,7 @@ def test_vec_env_kind_defaults_and_errors(tmp_path, capsys):
     assert kind("dummy", "surrogate", 4) == "dummy" and kind("batched", "surrogate", 1) == "batched"
     out = tmp_path / "run"
     assert train_cli.main(["--algo", "ppo", "--timesteps", "8", "--out", str(out), "--vec-env", "batched",
-                           "--config", _hp(tmp_path, "ppo")]) == 2
+                           "--fidelity", "fe", "--recipe", _hp(tmp_path, "ppo")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "batched" in err[0] and "surrogate" in err[0]
     assert not out.exists()
@@ -264,9 +305,9 @@ def batched_runs(tmp_path_factory):
     short = ["--set", "env.max_episode_s=0.1"]
     for name, seed, steps in (("ppo_a", 5, 64), ("ppo_b", 5, 64), ("ppo_c", 6, 64), ("ppo_r", 5, 32)):
         rc[name] = train_cli.main(["--algo", "ppo", "--timesteps", str(steps), "--out", str(base / name),
-                                   "--config", recipe, "--seed", str(seed), "--set", "env.wind_speed_max_mps=7.5",
+                                   "--recipe", recipe, "--seed", str(seed), "--set", "env.wind_speed_max_mps=7.5",
                                    *FAST, *(short if name == "ppo_r" else [])])
-    rc["ppo_r2"] = train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(base / "ppo_r"), "--config",
+    rc["ppo_r2"] = train_cli.main(["--algo", "ppo", "--timesteps", "64", "--out", str(base / "ppo_r"), "--recipe",
                                    recipe, "--seed", "5", "--resume", "--set", "env.wind_speed_max_mps=7.5", *FAST,
                                    *short])
     return base, rc
@@ -283,7 +324,7 @@ def test_batched_run_records_recipe_and_monitor(batched_runs):
     assert env["w_traction"] == 0.25  # the default entry's env
     assert env["wind_speed_max_mps"] == 7.5  # --set wins over the recipe's 9.0
     args = yaml.safe_load((out / "args.yml").read_text())
-    assert args["vec_env"] == "batched" and args["n_envs"] == 4 and args["env_id"] == "KiteFigureEightFast-v0"
+    assert args["vec_env"] == "batched" and args["n_envs"] == 4 and args["env_id"] == "KiteFigureEightFast-v1"
     # VecMonitor: one row per finished episode; 0.3 s episodes = at most 15 steps, 16 steps per kite were run
     lines = (out / "monitor.csv").read_text().splitlines()
     assert lines[0].startswith("#") and lines[1] == "r,l,t"
@@ -325,7 +366,7 @@ def test_batched_sac_with_held_out_evaluations(tmp_path):
 
     out = tmp_path / "sac_run"
     assert train_cli.main(["--algo", "sac", "--timesteps", "48", "--out", str(out), "--seed", "2",
-                           "--config", _recipe(tmp_path, "sac", eval_freq=24, eval_episodes=2), *FAST]) == 0
+                           "--recipe", _recipe(tmp_path, "sac", eval_freq=24, eval_episodes=2), *FAST]) == 0
     assert SAC.load(out / "model.zip", device="cpu").num_timesteps == 48
     assert (out / "checkpoints" / "model_replay_buffer_48_steps.pkl").is_file()
     ev = np.load(out / "eval" / "evaluations.npz")

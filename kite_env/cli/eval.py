@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Fly a policy in the full aeroelastic kite model and write metrics, time "
                 "series and the paper's Sect. IV figures into --out.",
                 epilog="exit status: 0 results written (also when the kite crashed: see metrics.json), "
-                "2 bad input (nothing written), 130 interrupted (nothing written)")
+                "1 no start converged, 2 bad input (nothing written), 3 numerical failure of the simulator (a bug; "
+                "nothing written), 130 interrupted (nothing written)")
     what = p.add_mutually_exclusive_group()
     what.add_argument("--policy", default="baseline",
                       help="policy to fly: baseline, random, constant:<a> (a in [-1, 1]), ppo / sac (the shipped "
@@ -94,8 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None,
                    help="simulated time per episode [s] (default: sim.duration_s of the config)")
     p.add_argument("--out", required=True, help="output folder (must not exist or be empty, unless --force)")
-    p.add_argument("--config", default=None, help="YAML config file (default: built-in defaults; for a model: "
-                   "the config.yml of its kite-train run folder if there is one)")
+    p.add_argument("--config", default=None, help="physics and task config YAML (default: the flying model); every "
+                   "policy flies it (an agent trained on another model is refused)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a config value (repeatable)")
     p.add_argument("--seed", type=int, default=None,
@@ -104,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="draw wind and start per episode from the env section's ranges (as in training)")
     p.add_argument("--fidelity", choices=FIDELITIES, default=None,
                    help="wing model: fe (the aeroelastic FE wing) or surrogate (the reduced-order wing); default: "
-                        "sim.fidelity of the config (for a model: of its training run)")
+                        "sim.fidelity of the config (fe)")
     p.add_argument("--force", action="store_true", help="replace an existing non-empty --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     return p
@@ -131,7 +132,7 @@ def summary(metrics: dict) -> str:
     """A short table of the main metrics and the paper comparison."""
     rows = [
         ("simulated / wall time [s]", f"{_fmt(metrics['sim_time_s'], '.2f')} / {_fmt(metrics['wall_time_s'], '.1f')}"
-                                      f"  (x{_fmt(metrics['real_time_factor'], '.1f')} real time)"),
+                                      f"  ({_fmt(metrics['real_time_factor'], '.2g')} s of wall time per simulated s)"),
         ("crashed", f"{_fmt(metrics['crashed'])} ({metrics['termination_reason']})"),
         ("metrics window", metrics["metrics_window"]),
         ("figure-eights completed", _fmt(metrics["figure_eights_completed"])),
@@ -199,29 +200,17 @@ class _Job:
         self.spec, self.label, self.cfg, self.env, self.agent, self.run_dir = spec, label, cfg, env, agent, run_dir
 
 
-def _model_config(spec: str) -> str | None:
-    """The ``config.yml`` of the kite-train run folder that holds the model ``spec`` (model.zip, checkpoints/,
-    eval/), if there is one."""
-    p = Path(spec)
-    for folder in (p.parent, p.parent.parent):
-        if (folder / "config.yml").is_file():
-            return str(folder / "config.yml")
-    return None
-
-
 def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
     """Config, environment and agent for ``spec``; raises ConfigError / PolicyError / ValueError on bad input."""
-    from agents.policies import make_agent, model_path
+    from agents.policies import make_agent
     from kite_env.config import ConfigError, load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config
     from kite_env.geometry import KITES
 
-    model = model_path(spec)  # a model.zip path or a shipped model's (ppo, sac)
-    config_file = args.config if args.config is not None or model is None else _model_config(str(model))
-    if config_file is not None and not Path(config_file).is_file():
-        raise ConfigError(f"--config file {config_file!r} does not exist")
-    cfg = load_config(config_file, overrides)
+    # every policy flies the one env of --config and --set; an agent trained on another model is refused
+    # (agents.policies.load_model_agent, naming the keys that differ)
+    cfg = load_config(args.config, overrides)
     if cfg.kite.name not in KITES:
         raise ConfigError(f"config key 'kite.name': unknown kite {cfg.kite.name!r} (valid: {', '.join(sorted(KITES))})")
     env = KiteFigureEightEnv(config=evaluation_config(cfg, randomize=args.randomize))
@@ -288,55 +277,61 @@ def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], ar
     return out
 
 
-#: columns of the comparison table: (header, function of the run's metrics.json)
-def _compare_columns():
-    def mean(key):
-        def f(m):
-            vals = [r.get(key) for r in m.get("episode_rows") or [m]]
-            vals = [float(v) for v in vals if v is not None]
-            return float(np.mean(vals)) if vals else None
-        return f
-
-    def crashed(m):
-        rows = m.get("episode_rows") or [m]
-        return f"{sum(bool(r['crashed']) for r in rows)}/{len(rows)}"
-
-    def ends(m):
-        rows = m.get("episode_rows") or [m]
-        reasons = sorted({r["termination_reason"] for r in rows})
-        return "; ".join(reasons)
-
-    return [
-        ("episodes", lambda m: m.get("episodes", 1)),
-        ("return mean", lambda m: m.get("episode_return_mean", m.get("episode_return"))),
-        ("return std", lambda m: m.get("episode_return_std", 0.0)),
-        ("crashed", crashed),
-        ("end", ends),
-        ("flight time mean [s]", mean("sim_time_s")),
-        ("figure-eights mean", mean("figure_eights_completed")),
-        ("tracking error RMS [deg]", mean("tracking_error_rms_deg")),
-        ("tether force mean [N]", mean("tether_force_mean_N")),
-        ("L/D mean", mean("lift_to_drag_mean")),
-        ("speed min [m/s]", mean("kite_speed_min_mps")),
-        ("speed max [m/s]", mean("kite_speed_max_mps")),
-    ]
+#: rows of the comparison table: (label, key of the episode rows, format)
+COMPARE_ROWS = (("return", "episode_return", ".4g"), ("flight time [s]", "sim_time_s", ".4g"),
+                ("figure-eights", "figure_eights_completed", ".3g"), ("tracking error RMS [deg]",
+                                                                      "tracking_error_rms_deg", ".3g"),
+                ("tether force mean [N]", "tether_force_mean_N", ".4g"), ("L/D mean", "lift_to_drag_mean", ".3g"),
+                ("speed min [m/s]", "kite_speed_min_mps", ".3g"), ("speed max [m/s]", "kite_speed_max_mps", ".3g"))
 
 
-def compare_table(results: list[tuple[str, dict]]) -> tuple[str, list[dict]]:
-    """Markdown table and CSV rows of the runs ``(name, metrics.json dict)``, side by side."""
-    cols = _compare_columns()
-    rows = []
+def mean_se(values) -> tuple[float | None, float | None]:
+    """Mean and standard error (sample standard deviation / sqrt(n); 0 for one value) of the finite ``values``."""
+    v = np.array([float(x) for x in values if x is not None and np.isfinite(float(x))])
+    if v.size == 0:
+        return None, None
+    return float(v.mean()), float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else 0.0
+
+
+def env_header(cfg, episodes: int, seed: int, randomize: bool) -> str:
+    """One line naming the env every policy of a comparison flew: id, fidelity, model, conditions, seeds."""
+    from kite_env.config import fingerprint
+    from kite_env.envs import ENV_ID, FAST_ENV_ID
+
+    f = fingerprint(cfg)
+    env_id = FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID
+    e = cfg.env
+    if randomize:
+        cond = (f"wind {e.wind_speed_min_mps:g}-{e.wind_speed_max_mps:g} m/s, turbulence "
+                f"{e.turbulence_intensity_min:g}-{e.turbulence_intensity_max:g} (drawn per episode)")
+    else:
+        cond = f"wind {cfg.wind.speed_mps:g} m/s, turbulence {cfg.wind.turbulence_intensity:g}"
+    return (f"env {env_id} (fidelity {cfg.sim.fidelity}), model '{f['preset']}' ({f['fingerprint']}), {cond}, "
+            f"{episodes} episode(s) of {e.max_episode_s:g} s, seeds {seed}-{seed + episodes - 1}")
+
+
+def compare_table(results: list[tuple[str, dict]], header: str = "") -> tuple[str, list[dict]]:
+    """Markdown table (one column per policy, mean +- standard error over its episodes) under ``header``, and CSV
+    rows (one per policy) of the runs ``(name, metrics.json dict)``."""
+    csv_rows, cols = [], []
     for name, m in results:
-        row = {"policy": name}
-        for header, f in cols:
-            row[header] = f(m)
-        rows.append(row)
-    heads = ["policy"] + [h for h, _ in cols]
-    lines = ["| " + " | ".join(heads) + " |", "|" + "|".join("---" if h in ("policy", "end", "crashed") else "---:"
-                                                          for h in heads) + "|"]
-    for row in rows:
-        lines.append("| " + " | ".join(_fmt(row[h], ".4g") for h in heads) + " |")
-    return "\n".join(lines) + "\n", rows
+        rows = m.get("episode_rows") or [m]
+        col = {"episodes": str(len(rows)),
+               "crashed": f"{sum(bool(r['crashed']) for r in rows)}/{len(rows)}",
+               "end": "; ".join(sorted({str(r['termination_reason']) for r in rows}))}
+        row = {"policy": name, "episodes": len(rows), "crashed": sum(bool(r["crashed"]) for r in rows),
+               "end": col["end"]}
+        for label, key, spec in COMPARE_ROWS:
+            mu, se = mean_se(r.get(key) for r in rows)
+            col[label] = "-" if mu is None else (_fmt(mu, spec) + (f" +- {_fmt(se, '.2g')}" if len(rows) > 1 else ""))
+            row[f"{key}_mean"], row[f"{key}_se"] = mu, se
+        cols.append(col)
+        csv_rows.append(row)
+    names = [name for name, _ in results]
+    lines = ([header, ""] if header else []) + ["| | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+    for label in ["episodes", "crashed", "end", *[r[0] for r in COMPARE_ROWS]]:
+        lines.append(f"| {label} | " + " | ".join(c[label] for c in cols) + " |")
+    return "\n".join(lines) + "\n", csv_rows
 
 
 def _labels(specs: list[str]) -> list[str]:
@@ -393,6 +388,10 @@ def main(argv=None) -> int:
         return _fail(why)
 
     flying = [j for j in jobs if j.run_dir is None]
+    header = ""
+    if flying:
+        c0 = flying[0].cfg
+        header = env_header(c0, args.episodes, c0.wind.seed, args.randomize)
     total = sum(j.cfg.env.max_episode_s for j in flying) * args.episodes
     bar = None
     done = [0.0]
@@ -429,7 +428,7 @@ def main(argv=None) -> int:
             folder = tmp / job.label if args.compare else tmp
             results.append((job.label, _write_run(folder, job, log, metrics, rows, argv)))
         if args.compare:
-            md, rows = compare_table(results)
+            md, rows = compare_table(results, header)
             (tmp / "compare.md").write_text(md)
             _write_csv(tmp / "compare.csv", rows)
             (tmp / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
@@ -467,7 +466,7 @@ def main(argv=None) -> int:
                       file=sys.stderr)
     if not args.quiet:
         if args.compare:
-            print(compare_table(results)[0], end="")
+            print(compare_table(results, header)[0], end="")
         else:
             m = results[0][1]
             print(summary(m))

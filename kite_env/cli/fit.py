@@ -1,11 +1,23 @@
 """``kite-fit``: make the fast fidelity's reduced-order wing for a model.
 
     kite-fit sample --out DIR [--episodes N] [--seed S] [--jobs J] [--config FILE] [--set SECTION.KEY=VALUE ...]
+    kite-fit fit --tapes DIR --out FILE.npz [--hidden 64,64] [--epochs 300] [--seed 0] [--config FILE] [--set ...]
+    kite-fit agreement --out DIR [--surrogate FILE.npz] [--episodes 50] [--jobs J] [--quick]
+    kite-fit start-table --out FILE_start.npz [--s-grid 16:58:3] [--w-grid -11:-2:1] [--config FILE] [--set ...]
 
 ``sample`` flies the episodes of the sampling plan (:func:`kite_env.surrogate.trajectories.sampling_plan`) in the full
 model and keeps every physics step of each (``DIR/ep_XXXX.npz``); a run that was stopped goes on where it stopped.
+``fit`` fits the reduced-order wing to the tapes (:mod:`kite_env.surrogate.fit`; every fifth episode held out) and
+writes its weights with the model they belong to, the held-out errors and the command. ``start-table`` tabulates
+the full model's start (:mod:`kite_env.surrogate.start`) for the reset of the fast fidelity; it belongs next to the
+weights as ``<stem>_start.npz``. Use the result with ``--set sim.surrogate_path=FILE.npz``, or install both into
+``kite_env/surrogate/data/<kite>.npz`` and ``<kite>_start.npz``.
 
-Exit status: 0 done, 2 bad input (one line, nothing written), 130 interrupted.
+``agreement`` flies the paper's controller and random steering in both fidelities and prints the comparison
+(:mod:`kite_env.surrogate.agreement`); the full model's flights are kept in ``DIR/fe`` for the next comparison.
+
+Exit status: 0 done (``agreement``: and the agreement holds), 1 the agreement does not hold, 2 bad input (one line,
+nothing written), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -34,6 +46,107 @@ def _overrides(args) -> list[str]:
     return [f"{s}.{k}={v}" for s in d for k, v in d[s].items() if v != d0[s][k] and s not in ("env",)]
 
 
+def _grid(spec: str):
+    import numpy as np
+
+    try:
+        lo, hi, step = (float(v) for v in spec.split(":"))
+    except ValueError:
+        raise ValueError(f"a grid is lo:hi:step, got {spec!r}") from None
+    return np.round(np.arange(lo, hi + 0.5 * step, step), 10)
+
+
+def _fit(args) -> int:
+    import json
+    import shlex
+
+    import numpy as np
+
+    from kite_env.config import fingerprint, load_config
+    from kite_env.polar import nominal_wing
+    from kite_env.surrogate.fit import (FILTERED, TAUS, FitData, build_dataset, corrective_samples, fit_mlp,
+                                        reference_stiffness)
+    from kite_env.surrogate.model import SurrogateWing
+    from kite_env.surrogate.samples import git_commit
+    from kite_env.surrogate.trajectories import load_tape
+
+    hidden = tuple(int(h) for h in args.hidden.split(","))
+    cfg = load_config(args.config, args.set)
+    if not cfg.structure.dynamic:
+        raise ValueError("kite-fit fits the reduced-order wing of the wing with inertia (structure.dynamic: true)")
+    if args.out.suffix != ".npz":
+        raise ValueError(f"--out must be a .npz file, got '{args.out}'")
+    wing = nominal_wing(cfg.kite.name, cfg)
+    data = build_dataset(args.tapes, cfg, wing, log=lambda m: print(m, flush=True))
+    K_b = reference_stiffness(cfg)
+    meta = {"model": fingerprint(cfg), "history": {"taus_s": list(TAUS), "filtered": list(FILTERED), "inertial": True},
+            "kite": cfg.kite.name, "n_sections": int(len(wing.mesh.sections)), "git_commit": git_commit(),
+            "command": shlex.join(["kite-fit", *sys.argv[1:]]), "tapes": data.meta["episodes"]}
+    q0 = wing.design_bridle
+    tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
+    extra_X, extra_Y, extra_g = [], [], []
+    for rnd in range(args.rounds + 1):
+        fit_data = data if not extra_X else FitData(np.vstack([data.inputs, *extra_X]),
+                                                     np.vstack([data.outputs, *extra_Y]),
+                                                     np.concatenate([data.group, *extra_g]), data.meta)
+        W, b, (xm, xs, ym, ys, lo, hi), report = fit_mlp(fit_data, hidden=hidden, epochs=args.epochs,
+                                                         batch=args.batch, lr=args.lr, holdout=args.holdout,
+                                                         seed=args.seed, K_b=K_b, log=lambda m: print(m, flush=True))
+        sw = SurrogateWing(W, b, xm, xs, ym, ys, lo, hi, {**meta, "held_out": report, "rounds": rnd,
+                                                          "n_samples": int(len(fit_data.inputs))}, K_b)
+        print(f"kite-fit: round {rnd}: bridle-force RMS error {report['force_rms_N']:.1f} N on held-out flights "
+              f"({len(fit_data.inputs)} samples)", flush=True)
+        if rnd == args.rounds:
+            break
+        n_new = 0
+        for path in sorted(Path(args.tapes).glob("ep_*.npz")):
+            arrays, tmeta = load_tape(path)
+            index = tmeta["plan"]["index"]
+            if index % args.holdout == args.holdout - 1:
+                continue  # held-out flights stay unseen
+            Xc, Yc = corrective_samples(arrays, tmeta, sw, cfg, q0, tips)
+            extra_X.append(Xc)
+            extra_Y.append(Yc)
+            extra_g.append(np.full(len(Xc), index))
+            n_new += len(Xc)
+        print(f"kite-fit: round {rnd + 1}: {n_new} corrective samples at the fitted wing's own states", flush=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    sw.save(args.out)
+    print(json.dumps({k: v for k, v in report.items() if k != "rms"}))
+    print(f"kite-fit: bridle-force RMS error {report['force_rms_N']:.1f} N = "
+          f"{100 * report['force_rms_rel_traction']:.2f} % of the mean traction on held-out flights -> {args.out}")
+    return 0
+
+
+def _start_table(args) -> int:
+    from kite_env.config import load_config
+    from kite_env.surrogate.start import build_start_table
+
+    cfg = load_config(args.config, args.set)
+    s, w = _grid(args.s_grid), _grid(args.w_grid)
+    table = build_start_table(cfg, s, w, log=lambda m: print(m, flush=True))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    table.save(args.out)
+    print(f"kite-fit: start table {len(s)} x {len(w)}, {table.meta['n_failed']} points without a converged start "
+          f"-> {args.out}")
+    return 0
+
+
+def _agreement(args) -> int:
+    from kite_env.surrogate.agreement import FLIGHTS, Flight, agreement_table, run_agreement
+
+    flights = FLIGHTS
+    if args.quick:
+        flights = (Flight("5 m/s, 20 s", 5.0, 0.0, 20.0), Flight("8 m/s, turbulence 0.1, 20 s", 8.0, 0.1, 20.0))
+        args.episodes, args.duration = min(args.episodes, 4), min(args.duration, 5.0)
+    res = run_agreement(args.out, args.surrogate, args.episodes, args.seed, args.duration, flights, args.jobs,
+                        log=lambda m: print(m, flush=True))
+    print(agreement_table(res), end="")
+    ok = all(r["ok"] for r in res["flights"]) and res["random"]["ok"]
+    print(f"kite-fit: agreement {'holds' if ok else 'does not hold'} -> {args.out / 'agreement.md'}")
+    return 0 if ok else 1
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="kite-fit", description="Make the reduced-order wing of a model.")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -44,12 +157,46 @@ def main(argv=None) -> int:
     s.add_argument("--jobs", type=int, default=1)
     s.add_argument("--config", default=None, help="physics config (YAML); default: the flying model")
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    f = sub.add_parser("fit", help="fit the reduced-order wing to the tapes")
+    f.add_argument("--tapes", required=True, type=Path)
+    f.add_argument("--out", required=True, type=Path)
+    f.add_argument("--hidden", default="64,64")
+    f.add_argument("--epochs", type=int, default=300)
+    f.add_argument("--batch", type=int, default=2048)
+    f.add_argument("--lr", type=float, default=2e-3)
+    f.add_argument("--holdout", type=int, default=5)
+    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--rounds", type=int, default=2, help="rounds of corrective samples at the fitted wing's own "
+                   "states (data as demonstrator; 0: none)")
+    f.add_argument("--config", default=None)
+    f.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    t = sub.add_parser("start-table", help="tabulate the full model's start for the fast fidelity's reset")
+    t.add_argument("--out", required=True, type=Path)
+    t.add_argument("--s-grid", default="16:58:3", help="tangential apparent speed lo:hi:step [m/s]")
+    t.add_argument("--w-grid", default="-11:-2:1", help="normal apparent velocity lo:hi:step [m/s]")
+    t.add_argument("--config", default=None)
+    t.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    g = sub.add_parser("agreement", help="fly the baseline and random steering in both fidelities and compare")
+    g.add_argument("--out", required=True, type=Path, help="folder of the results (keeps the full model's flights)")
+    g.add_argument("--surrogate", default=None, help="weights (.npz) to compare (default: the shipped ones)")
+    g.add_argument("--episodes", type=int, default=50)
+    g.add_argument("--seed", type=int, default=300)
+    g.add_argument("--duration", type=float, default=30.0, help="random-steering episode length [s]")
+    g.add_argument("--jobs", type=int, default=1)
+    g.add_argument("--quick", action="store_true", help="short flights (20 s, 2 winds, 4 episodes of 5 s): a check "
+                   "of the command, not of the agreement")
     args = p.parse_args(argv)
     from kite_env.config import ConfigError
 
     try:
         over = _overrides(args)
-    except ConfigError as exc:
+        if args.cmd == "fit":
+            return _fit(args)
+        if args.cmd == "start-table":
+            return _start_table(args)
+        if args.cmd == "agreement":
+            return _agreement(args)
+    except (ConfigError, FileNotFoundError, ValueError) as exc:
         print(f"kite-fit: error: {exc}", file=sys.stderr)
         return 2
     if args.episodes < 1 or args.jobs < 1:

@@ -1,28 +1,32 @@
-"""``kite-train``: train a PPO or SAC agent (Stable-Baselines3) on ``KiteFigureEight-v0``.
+"""``kite-train``: train a PPO or SAC agent (Stable-Baselines3) on ``KiteFigureEightFast-v1`` (or the full model).
 
-    kite-train --algo ppo|sac --timesteps N --out runs/ppo [--config configs/agents/ppo.yaml] [--n-envs K]
-               [--vec-env batched|subproc|dummy] [--fidelity fe|surrogate] [--seed S] [--resume]
-               [--env-config FILE] [--set section.key=value ...]
+    kite-train --algo ppo|sac --timesteps N --out runs/ppo [--recipe FILE] [--config FILE] [--set section.key=value ...]
+               [--fidelity surrogate|fe] [--n-envs K] [--vec-env batched|subproc|dummy] [--seed S] [--resume]
 
-Hyperparameters come from a YAML file keyed by environment id, with a ``default`` entry (``configs/agents/``);
-the environment and physics from the project config (``--env-config``, ``--set``). An entry of the hyperparameter
-file is a training recipe (rl-zoo style): besides the algorithm's arguments it may hold
+``--config`` is the physics and task config (YAML, as in ``kite-eval`` and ``kite-bench``; default: the flying
+model), ``--set`` overrides any of its keys, ``--recipe`` the training recipe (default: the one shipped for the
+algorithm, ``agents/recipes/<algo>.yaml``). The fidelity defaults to the fast one (``surrogate``). A recipe is keyed
+by env id with a ``default`` entry (rl-zoo style); an entry holds the algorithm's arguments and may hold
 
-* ``env``: a mapping ``section.key: value`` of project-config overrides (as ``--set``), applied after
-  ``--env-config`` and before ``--set`` (the command line wins); the ``default`` entry's mapping is merged with the
-  env id's,
+* ``env``: a mapping ``section.key: value`` of config keys, applied on top of ``--config`` and below ``--set`` (the
+  command line wins; a randomised quantity that ``--set`` gives is flown at that value, its range dropped),
 * ``n_envs``: parallel environments (``--n-envs`` wins),
 * ``vec_env``: ``batched`` (all kites in one :class:`kite_env.envs.vector.SB3VecEnv`, surrogate fidelity only),
   ``subproc`` (one process per env) or ``dummy`` (all in this process, one after the other); ``--vec-env`` wins.
   Default: ``batched`` for the surrogate fidelity with more than one env, else ``subproc`` for several envs and
   ``dummy`` for one.
 
+A recipe key that is neither an argument of the algorithm nor one of the keys above, an env id that is not
+registered, or a physics config given as the recipe exits with status 2 and one line, before anything is written.
+
 The training env is wrapped in ``VecMonitor`` (episode returns and lengths in ``OUT/monitor.csv``) and, with
 ``normalize``, ``VecNormalize``; the evaluation env (``EvalCallback``) draws the same randomised conditions with
-the held-out seed ``seed + 10_000``. The run folder gets ``config.yml`` (the complete environment config, recipe
-and ``--set`` applied), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/``, periodic checkpoints with the
-VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final ``model.zip``
-(+ ``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one. A numerical failure of
+the held-out seed ``seed + 10_000``. Progress (steps, steps/s, mean episode return, time left) is printed every
+``--progress-s`` seconds on any output. The run folder gets ``config.yml`` (the complete config flown),
+``model.json`` (the model it was trained on: preset and fingerprint, :func:`kite_env.config.fingerprint`; an agent
+loads only into that model), ``args.yml``, ``command.txt``, TensorBoard logs in ``tb/``, periodic checkpoints with the
+VecNormalize statistics in ``checkpoints/``, evaluations in ``eval/`` and the final ``model.zip`` (+
+``vecnormalize.pkl``). Ctrl-C saves a checkpoint; ``--resume`` continues from the newest one. A numerical failure of
 the wing with inertia (:class:`~kite_env.dynamics.simulator.NumericalFailure`, a bug of the simulator) in an env of
 this process (``dummy``) or in a ``subproc`` worker (which writes it into ``OUT/.worker_failures`` before it ends:
 the worker prints its traceback, this process reads the failure back) saves a checkpoint too and exits with status 3
@@ -32,20 +36,21 @@ and the failure's message.
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import shlex
 import sys
+import time
 from pathlib import Path
 
 import yaml
 
-from kite_env.config import FIDELITIES, ConfigError, load_config
+from kite_env.config import FIDELITIES, ConfigError, config_from_dict, fingerprint, load_config, parse_overrides
+from kite_env.envs import ENV_ID, FAST_ENV_ID
 
 ALGOS = ("ppo", "sac")
-ENV_ID = "KiteFigureEight-v0"
-FAST_ENV_ID = "KiteFigureEightFast-v0"  # the same env with sim.fidelity = surrogate (hyperparameters keyed by it)
 VEC_ENVS = ("batched", "subproc", "dummy")
-#: hyperparameter keys that are not constructor arguments of the algorithm
+#: recipe keys that are not constructor arguments of the algorithm
 _META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs", "env", "vec_env"}
 #: offset of the evaluation env's seed from the training seed (held-out episodes)
 EVAL_SEED_OFFSET = 10_000
@@ -59,39 +64,77 @@ _DEFAULT_HP = {
 }
 
 
+def default_recipe(algo: str) -> Path:
+    """The recipe shipped for ``algo`` (``agents/recipes/<algo>.yaml``)."""
+    from importlib.resources import files
+
+    return Path(str(files("agents").joinpath("recipes", f"{algo}.yaml")))
+
+
 class UsageError(Exception):
     pass
 
 
-def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = ENV_ID) -> dict:
-    """Hyperparameters for ``algo``: built-in defaults, then the file's ``default`` entry, then its ``env_id`` entry."""
+def algorithm_arguments(algo: str) -> set[str]:
+    """The constructor arguments of the Stable-Baselines3 class of ``algo`` a recipe may set."""
+    import inspect
+
+    return {n for n in inspect.signature(_algo_class(algo).__init__).parameters if n not in ("self", "env")}
+
+
+def validate_recipe(data, p: Path, algo: str) -> None:
+    """One clear :class:`UsageError` for a recipe that is not one (module docstring)."""
+    from kite_env.config import Config
+
+    if not isinstance(data, dict):
+        raise UsageError(f"recipe '{p}' must map env ids (and 'default') to settings")
+    sections = {f for f in Config.__dataclass_fields__}
+    if set(data) & sections:
+        raise UsageError(f"recipe '{p}' is a physics config (sections {', '.join(sorted(set(data) & sections))}), not "
+                         f"a training recipe: give it with --config (the recipe is --recipe)")
+    valid_ids = ("default", ENV_ID, FAST_ENV_ID)
+    for key, entry in data.items():
+        if key not in valid_ids:
+            raise UsageError(f"recipe '{p}': unknown env id '{key}' (valid: {', '.join(valid_ids)})")
+        if entry is None:
+            continue
+        if not isinstance(entry, dict):
+            raise UsageError(f"recipe '{p}': entry '{key}' must be a mapping")
+        allowed = algorithm_arguments(algo) | _META_KEYS
+        for name in entry:
+            if name not in allowed:
+                import difflib
+
+                near = difflib.get_close_matches(str(name), sorted(allowed), n=1)
+                raise UsageError(f"recipe '{p}': '{key}.{name}' is neither an argument of {algo.upper()} nor a recipe "
+                                 f"key" + (f" (did you mean '{near[0]}'?)" if near else ""))
+        env = entry.get("env") or {}
+        if not isinstance(env, dict):
+            raise UsageError(f"recipe '{p}': '{key}.env' must map 'section.key' to values")
+
+
+def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = FAST_ENV_ID) -> dict:
+    """Hyperparameters for ``algo``: built-in defaults, then the recipe's ``default`` entry, then its ``env_id``
+    entry (``path`` None: the shipped recipe, :func:`default_recipe`)."""
     hp = dict(_DEFAULT_HP[algo])
-    if path is None:
-        return hp
-    p = Path(path)
+    p = Path(path) if path is not None else default_recipe(algo)
     if not p.is_file():
-        raise UsageError(f"hyperparameter file '{p}' does not exist")
+        raise UsageError(f"recipe '{p}' does not exist")
     try:
         data = yaml.safe_load(p.read_text()) or {}
     except yaml.YAMLError as exc:
-        raise UsageError(f"hyperparameter file '{p}' is not valid YAML: {exc}") from None
-    if not isinstance(data, dict):
-        raise UsageError(f"hyperparameter file '{p}' must map env ids (and 'default') to settings")
+        raise UsageError(f"recipe '{p}' is not valid YAML: {exc}") from None
+    validate_recipe(data, p, algo)
     env_overrides: dict = {}
     for key in ("default", env_id):
         entry = data.get(key) or {}
-        if not isinstance(entry, dict):
-            raise UsageError(f"hyperparameter file '{p}': entry '{key}' must be a mapping")
-        env = entry.get("env") or {}
-        if not isinstance(env, dict):
-            raise UsageError(f"hyperparameter file '{p}': '{key}.env' must map 'section.key' to values")
-        env_overrides.update(env)
+        env_overrides.update(entry.get("env") or {})
         hp.update(entry)
     if env_overrides:
         hp["env"] = env_overrides
     vec = hp.get("vec_env")
     if vec is not None and vec not in VEC_ENVS:
-        raise UsageError(f"hyperparameter file '{p}': vec_env must be one of {', '.join(VEC_ENVS)}, got {vec!r}")
+        raise UsageError(f"recipe '{p}': vec_env must be one of {', '.join(VEC_ENVS)}, got {vec!r}")
     return hp
 
 
@@ -280,22 +323,30 @@ def _algo_class(algo: str):
     return {"ppo": PPO, "sac": SAC}[algo]
 
 
+def training_config(args) -> tuple:
+    """``(cfg, env_id, hp)``: the config flown (``--config``, then the recipe's ``env``, then ``--set`` and the
+    fidelity, each a layer of :func:`kite_env.config.config_from_dict`) and the recipe's hyperparameters."""
+    fidelity = args.fidelity or "surrogate"
+    env_id = FAST_ENV_ID if fidelity == "surrogate" else ENV_ID
+    hp = load_hyperparameters(args.recipe, args.algo, env_id)
+    cfg = load_config(args.config)
+    cfg = config_from_dict(parse_overrides(recipe_overrides(hp)), cfg)
+    if cfg.sim.fidelity != "fe":
+        raise UsageError(f"the recipe for {env_id} sets sim.fidelity (set the fidelity with --fidelity)")
+    cfg = config_from_dict(parse_overrides(args.set), cfg)
+    cfg = config_from_dict({"sim": {"fidelity": fidelity}}, cfg)
+    return cfg, env_id, hp
+
+
 def train(args) -> Path:
     import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
 
+    from kite_env.config import check_model
     from kite_env.dynamics.simulator import NumericalFailure
 
     out = Path(args.out)
-    cli_sets = [*args.set, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])]
-    cfg = load_config(args.env_config, cli_sets)
-    env_id = FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID
-    hp = load_hyperparameters(args.config, args.algo, env_id)
-    if hp.get("env"):  # the recipe's environment, then the command line's --set (which wins)
-        cfg = load_config(args.env_config, [*recipe_overrides(hp), *cli_sets])
-        if (FAST_ENV_ID if cfg.sim.fidelity == "surrogate" else ENV_ID) != env_id:
-            raise UsageError(f"the recipe for {env_id} changes sim.fidelity to {cfg.sim.fidelity!r} (set the fidelity "
-                             "with --fidelity, not in the recipe's env)")
+    cfg, env_id, hp = training_config(args)
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
     if n_envs < 1:
         raise UsageError(f"--n-envs must be >= 1, got {n_envs}")
@@ -306,10 +357,17 @@ def train(args) -> Path:
         raise UsageError(f"--resume: no checkpoint in '{ckpt_dir}'")
     if not args.resume and out.exists() and any(out.iterdir()) and not args.force:
         raise UsageError(f"output folder '{out}' is not empty (use --resume to continue it or --force to overwrite)")
+    if args.resume:  # the run goes on in the model it was trained on
+        check_model(_read_json(out / "model.json"), cfg, f"run '{out}'")
+    if cfg.sim.fidelity == "surrogate":  # the reduced-order wing must be this model's (one clear error, nothing written)
+        from kite_env.surrogate import surrogate_for
+
+        surrogate_for(cfg)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
     if not args.resume:
         (out / "config.yml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+        (out / "model.json").write_text(json.dumps(fingerprint(cfg), indent=1, default=repr))
         (out / "args.yml").write_text(yaml.safe_dump({**vars(args), "env_id": env_id, "n_envs": n_envs,
                                                       "vec_env": kind, "hyperparameters": hp}, sort_keys=False))
         (out / "command.txt").write_text(" ".join(shlex.quote(a) for a in ["kite-train", *sys.argv[1:]]) + "\n")
@@ -342,6 +400,7 @@ def train(args) -> Path:
     remaining = max(0, int(args.timesteps) - int(model.num_timesteps))
     freq = max(1, int(hp["checkpoint_freq"]) // n_envs)
     callbacks = [
+        _progress_callback(int(args.timesteps), float(args.progress_s)),
         CheckpointCallback(save_freq=freq, save_path=str(ckpt_dir), name_prefix="model",
                            save_vecnormalize=bool(hp["normalize"]), save_replay_buffer=args.algo == "sac"),
         EvalCallback(eval_env, n_eval_episodes=int(hp["eval_episodes"]),
@@ -394,6 +453,53 @@ def train(args) -> Path:
     return out / "model.zip"
 
 
+def _read_json(path: Path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def _progress_callback(total: int, every_s: float):
+    """A callback printing, every ``every_s`` seconds of wall time and at the end, the steps done, the steps per
+    second, the mean return of the last 100 episodes and the time left (on any output, not only a terminal)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Progress(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = self.last = time.perf_counter()
+            self.n0 = int(self.model.num_timesteps)
+
+        def _line(self) -> str:
+            n = int(self.model.num_timesteps)
+            dt = max(time.perf_counter() - self.t0, 1e-9)
+            rate = (n - self.n0) / dt
+            eps = list(self.model.ep_info_buffer or [])
+            ret = (f"episode return {sum(e['r'] for e in eps) / len(eps):.1f} (last {len(eps)} episodes)" if eps
+                   else "no episode ended yet")
+            left = (total - n) / rate if rate > 0 else float("inf")
+            return (f"kite-train: {n:,} / {total:,} steps  {rate:,.0f} steps/s  {ret}  "
+                    f"{_duration(left)} left")
+
+        def _on_step(self) -> bool:
+            if time.perf_counter() - self.last >= every_s:
+                self.last = time.perf_counter()
+                print(self._line(), flush=True)
+            return True
+
+        def _on_training_end(self) -> None:
+            print(self._line(), flush=True)
+
+    return Progress()
+
+
+def _duration(s: float) -> str:
+    if s == float("inf"):
+        return "?"
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
 def _has_rich() -> bool:
     try:
         import rich  # noqa: F401
@@ -408,10 +514,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--algo", required=True, choices=ALGOS)
     p.add_argument("--timesteps", type=int, required=True, help="total environment steps")
     p.add_argument("--out", required=True, help="run folder")
-    p.add_argument("--config", default=None, help="hyperparameter YAML (keyed by env id, with 'default')")
-    p.add_argument("--env-config", default=None, help="project config YAML for the environment and physics")
+    p.add_argument("--recipe", default=None, help="training recipe YAML (keyed by env id, with 'default'); default: "
+                   "the shipped agents/recipes/<algo>.yaml")
+    p.add_argument("--config", default=None, help="physics and task config YAML (default: the flying model)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override any project config value (repeatable)")
+                   help="override any config value (repeatable); wins over the recipe")
+    p.add_argument("--progress-s", type=float, default=30.0, help="seconds between progress lines (default 30)")
     p.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the recipe's n_envs, "
                    "else 1)")
     p.add_argument("--vec-env", choices=VEC_ENVS, default=None,
@@ -420,8 +528,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "for n_envs > 1, dummy for 1")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--fidelity", choices=FIDELITIES, default=None,
-                   help="wing model of the training env: fe (the aeroelastic FE wing) or surrogate (reduced-order "
-                        "wing, KiteFigureEightFast-v0); default: sim.fidelity of the config")
+                   help="wing model of the training env: surrogate (the reduced-order wing, KiteFigureEightFast-v1; "
+                        "the default) or fe (the aeroelastic FE wing, KiteFigureEight-v1, about 100x slower)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT/checkpoints")
     p.add_argument("--force", action="store_true", help="train into a non-empty OUT")
     return p

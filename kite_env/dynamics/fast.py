@@ -259,6 +259,16 @@ def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
 
 
 @njit(**_JIT)
+def add_stiffness(x, K, y):
+    """``y[:12] += K x[:12]``: the known linear part of the bridle force (:attr:`SurrogateWing.K_b`)."""
+    for i in range(12):
+        acc = 0.0
+        for j in range(12):
+            acc += K[i, j] * x[j]
+        y[i] += acc
+
+
+@njit(**_JIT)
 def history_inputs(x, z, sel):
     """The latent state's inputs of the reduced-order wing (:mod:`kite_env.surrogate.fit`): ``x[30 + j n + i] =
     z[j, i] - x[sel[i]]`` for the filters ``z`` (n_tau, n) of the inputs ``sel`` (n,); nothing without filters."""
@@ -283,7 +293,7 @@ def latent_update(x, z, sel, gain, reset):
 
 @njit(**_JIT)
 def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp, n_modes, W0, b0, W1, b1,
-                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status, Z, sel, gain):
+                   W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status, Z, sel, gain, K_b):
     """Inputs ``X`` (n, n_in), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3), its turbulent part at the
     masses and the frame origin ``turb`` (n, 6, 3) and frame K (n, 3, 3) of every ``active`` kite at its time ``t``
     (n,) and state ``r``, ``v`` (n, 5, 3), with its bridle lines and status (as :func:`step_kites`); the latent
@@ -302,6 +312,7 @@ def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, o
         latent_update(X[k], Z[k], sel, gain, True)
         history_inputs(X[k], Z[k], sel)
         mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
+        add_stiffness(X[k], K_b, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         finite = True
         for i in range(5):
@@ -356,7 +367,7 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
                tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether,
-               tension, length, status, Z, sel, gain):
+               tension, length, status, Z, sel, gain, K_b):
     """One RK4 step of ``dt`` for every ``active`` kite, in place (:class:`SurrogateKites.step`).
 
     Stage 1 uses ``Y`` and ``wind`` of the current states (the end of the last step); stages 2-4 evaluate the wing
@@ -417,6 +428,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
                         amp[k], n_modes, xs, ws, Rs, pos, w6, t_buf, turb[k], True)
             history_inputs(xs, Z[k], sel)
             mlp_row(xs, W0, b0, W1, b1, W2, b2, h0, h1, h2, ys)
+            add_stiffness(xs, K_b, ys)
             _accelerations(rs, vs, ws, ys, F0, zero_q, zero_K, m, rest[k], k_c, c_c, rho, line_cd,
                            line_diameter, tether_diameter, l0 + h * ld, ld, tip_lengths, pair_damping[k], gravity,
                            alpha, ka[st], lam, work)
@@ -444,6 +456,7 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
         latent_update(X[k], Z[k], sel, gain, False)
         history_inputs(X[k], Z[k], sel)
         mlp_row(X[k], W0, b0, W1, b1, W2, b2, h0, h1, h2, Y[k])
+        add_stiffness(X[k], K_b, Y[k])
         _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
         status[k] = _status(ok, X[k], Y[k], lo, hi)
 
@@ -511,6 +524,7 @@ class SurrogateKites:
         self._sel = np.array(surrogate.filtered, dtype=np.int64)
         self._gain = np.array([1.0 - math.exp(-self.dt / tau) for tau in surrogate.taus])
         self.Z = np.zeros((n, len(self._gain), len(self._sel)))
+        self._K_b = np.ascontiguousarray(surrogate.K_b, dtype=float)
         self.Y = np.zeros((n, 17))
         self.R = np.zeros((n, 3, 3))
         self.wind = np.zeros((n, 5, 3))
@@ -558,7 +572,7 @@ class SurrogateKites:
         evaluate_kites(self.t, self.r, self.v, self.rest, self.q_design, self.wind_f, self.wind_i, self.wavevec_t,
                        self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights, self.k_c, self.c_c,
                        self._lo, self._hi, active, self.X, self.Y, self.wind, self.turb, self.R, self.tension,
-                       self.length, self.status, self.Z, self._sel, self._gain)
+                       self.length, self.status, self.Z, self._sel, self._gain, self._K_b)
 
     def outside(self, k: int) -> list[str]:
         """Names of the inputs of kite ``k`` beyond the envelope."""
@@ -582,7 +596,7 @@ class SurrogateKites:
                    self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d,
                    self.tether_length, self.reel_speed, self._winch, self.tip_lengths, self.g, self.baumgarte,
                    self._lo, self._hi, self.X, self.Y, self.wind, self.turb, self.R, self.tether_force, self.tension,
-                   self.length, self.status, self.Z, self._sel, self._gain)
+                   self.length, self.status, self.Z, self._sel, self._gain, self._K_b)
         return self.status
 
 
@@ -591,17 +605,23 @@ def _default_start_table(cfg, surrogate_path=None):
     """The start table that belongs to the surrogate (next to its weights or shipped), None if there is none."""
     from pathlib import Path
 
+    from kite_env.config import check_model
     from kite_env.surrogate import default_start_path
     from kite_env.surrogate.start import StartTable
 
     if surrogate_path:
         p = Path(surrogate_path)
         p = p.with_name(p.stem + "_start.npz")
-        return StartTable.load(p) if p.is_file() else None
-    try:
-        return StartTable.load(default_start_path(cfg.kite.name))
-    except FileNotFoundError:
-        return None
+        if not p.is_file():
+            return None
+    else:
+        try:
+            p = default_start_path(cfg.kite.name)
+        except FileNotFoundError:
+            return None
+    table = StartTable.load(p)
+    check_model(table.meta.get("model"), cfg, f"start table '{p}'")
+    return table
 
 
 _NAN3 = np.full(3, np.nan)
@@ -679,9 +699,9 @@ class SurrogateFlightSimulator(FlightSimulator):
         self.cfg, self.wind, self.backend = cfg, wind, "numba"
         self.wing = wing if wing is not None else nominal_wing(cfg.kite.name, cfg)
         if surrogate is None:
-            from kite_env.surrogate import load_default
+            from kite_env.surrogate import surrogate_for
 
-            surrogate = load_default(cfg.kite.name)
+            surrogate, surrogate_path = surrogate_for(cfg)
         self.surrogate = surrogate
         # a wing fitted to the wing with inertia carries the effective force on Table 1's point masses and flies
         # without the quasi-static wing's tip dampers (kite_env.surrogate.fit)

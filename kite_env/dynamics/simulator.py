@@ -88,10 +88,10 @@ def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
     or the model shipped for ``kite.name``)."""
     if cfg.sim.fidelity == "surrogate":
         from kite_env.dynamics.fast import SurrogateFlightSimulator
-        from kite_env.surrogate.model import SurrogateWing
+        from kite_env.surrogate import surrogate_for
 
-        sw = SurrogateWing.load(cfg.sim.surrogate_path) if cfg.sim.surrogate_path else None
-        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=cfg.sim.surrogate_path or None,
+        sw, path = surrogate_for(cfg)
+        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=path,
                                         start=cfg.sim.surrogate_start,
                                         on_outside="fe" if cfg.sim.surrogate_fallback else "error")
     if cfg.structure.dynamic:

@@ -1,8 +1,15 @@
 """Gymnasium environments of kite_env (registered on ``import kite_env``); the physics modules never import gymnasium.
 
-* ``KiteFigureEight-v0``: :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`, the full aeroelastic model
+* ``KiteFigureEight-v1``: :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`, the full aeroelastic model
   (``fidelity="surrogate"`` for the reduced-order wing).
-* ``KiteFigureEightFast-v0``: the same environment with the reduced-order wing (``fidelity="surrogate"``).
+* ``KiteFigureEightFast-v1``: the same environment with the reduced-order wing (``fidelity="surrogate"``).
+
+Version history (Gymnasium's convention: the version changes when the dynamics change):
+
+* v1: the flying model (the wing with inertia, the rope tether, the actuator's speed limit, the ground station's
+  force limit), its reduced-order wing with a latent state, and action +-1 = +-1.5 m of steering.
+* v0 (removed): the model before it flew (quasi-static wing, Eq. 3 as printed, rod tether, constant tether length),
+  whose every flight ended within seconds; action +-1 = +-0.25 m.
 
 Both have the ``vector_entry_point`` :func:`kite_env.envs.vector.make_vector_env`:
 ``gymnasium.make_vec(id, num_envs, vectorization_mode="vector_entry_point")`` (the default mode) gives the batched
@@ -10,8 +17,8 @@ Both have the ``vector_entry_point`` :func:`kite_env.envs.vector.make_vector_env
 and a ``SyncVectorEnv`` of single envs in the FE fidelity; ``vectorization_mode="sync"`` always the latter.
 """
 
-ENV_ID = "KiteFigureEight-v0"
-FAST_ENV_ID = "KiteFigureEightFast-v0"
+ENV_ID = "KiteFigureEight-v1"
+FAST_ENV_ID = "KiteFigureEightFast-v1"
 _VECTOR_ENTRY_POINT = "kite_env.envs.vector:make_vector_env"
 
 

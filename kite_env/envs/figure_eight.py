@@ -225,7 +225,8 @@ class KiteFigureEightEnv(gym.Env):
             rng = self.np_random
             if env.randomize:
                 wind_speed = float(rng.uniform(env.wind_speed_min_mps, env.wind_speed_max_mps))
-                ti = (float(rng.uniform(0.0, env.turbulence_intensity_max)) if env.turbulence_intensity_max > 0
+                ti = (float(rng.uniform(env.turbulence_intensity_min, env.turbulence_intensity_max))
+                      if env.turbulence_intensity_max > 0
                       else 0.0)
                 wind_seed = int(rng.integers(0, 2**31 - 1))
                 # one uniform draw either way (2 pi u is the unbounded draw, bit for bit as uniform(0, 2 pi))

@@ -47,3 +47,16 @@ def load_default_start(kite_name: str):
     from kite_env.surrogate.start import StartTable
 
     return StartTable.load(default_start_path(kite_name))
+
+
+def surrogate_for(cfg):
+    """``(wing, path)``: the reduced-order wing of ``cfg``'s model, ``sim.surrogate_path`` or the one shipped for
+    ``kite.name``. One fitted to another model raises :class:`kite_env.config.ModelMismatch` naming the keys that
+    differ (the fast fidelity is never a silent extrapolation to another model)."""
+    from kite_env.config import check_model
+    from kite_env.surrogate.model import SurrogateWing
+
+    path = Path(cfg.sim.surrogate_path) if cfg.sim.surrogate_path else default_surrogate_path(cfg.kite.name)
+    wing = SurrogateWing.load(path)
+    check_model(wing.meta.get("model"), cfg, f"reduced-order wing '{path}'")
+    return wing, path

@@ -49,6 +49,9 @@ class SurrogateWing:
     x_min: np.ndarray
     x_max: np.ndarray
     meta: dict = field(default_factory=dict)
+    #: (12, 12) [N/m]: the known linear part of the bridle force, ``F_b = MLP(x) + K_b (q_b - q_design)`` (zero: all
+    #: learnt; :mod:`kite_env.surrogate.fit` explains why the wing with inertia's has one)
+    K_b: np.ndarray = field(default_factory=lambda: np.zeros((12, 12)))
 
     def __post_init__(self):
         if len(self.weights) != len(self.biases) or not self.weights:
@@ -92,6 +95,7 @@ class SurrogateWing:
             if i < last:
                 h = np.tanh(h)
         y = h * self.y_std + self.y_mean
+        y[:, :12] += np.atleast_2d(x)[:, :12] @ self.K_b.T
         return y[0] if x.ndim == 1 else y
 
     def envelope(self, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
@@ -114,6 +118,7 @@ class SurrogateWing:
         arrays.update({f"b{i}": b.astype(np.float32) for i, b in enumerate(self.biases)})
         np.savez_compressed(path, **arrays, x_mean=self.x_mean, x_std=self.x_std, y_mean=self.y_mean,
                             y_std=self.y_std, x_min=self.x_min, x_max=self.x_max, meta=json.dumps(self.meta),
+                            K_b=self.K_b,
                             input_names=np.array(self.input_names), output_names=np.array(OUTPUT_NAMES))
         return path
 
@@ -131,7 +136,7 @@ class SurrogateWing:
             W = [z[f"W{i}"].astype(float) for i in range(n)]
             b = [z[f"b{i}"].astype(float) for i in range(n)]
             sw = cls(W, b, z["x_mean"], z["x_std"], z["y_mean"], z["y_std"], z["x_min"], z["x_max"],
-                     json.loads(str(z["meta"])))
+                     json.loads(str(z["meta"])), z["K_b"] if "K_b" in z.files else np.zeros((12, 12)))
             if tuple(z["input_names"]) != sw.input_names or tuple(z["output_names"]) != OUTPUT_NAMES:
                 raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
             return sw

@@ -157,6 +157,7 @@ def start_state(cfg, s: float, w: float):
     from kite_env.dynamics.simulator import FlightSimulator
 
     sim = FlightSimulator(cfg, _NoWind())
+    sim.particle_wing = not cfg.structure.dynamic  # (the wing with inertia's start has no tip dampers)
     sim.wing.reset()
     sim.wing.line_length_m = cfg.dynamics.power_line_length_m
     X = FlightState(v_kite=np.array([-float(s), 0.0, float(w)]), omega=np.zeros(3), v_wind=np.zeros(3))
@@ -167,6 +168,7 @@ def build_start_table(cfg, s_values, w_values, log=None) -> StartTable:
     """Run the full model's start (:func:`start_state`) at every (s, w) of the grid ``s_values`` x ``w_values``
     [m/s]; points that do not converge are stored as NaN and listed in ``meta["failed"]``. ``log(str)`` reports
     each point."""
+    from kite_env.config import fingerprint
     from kite_env.dynamics.simulator import SimulationError
     from kite_env.surrogate.samples import git_commit
 
@@ -187,7 +189,7 @@ def build_start_table(cfg, s_values, w_values, log=None) -> StartTable:
                 msg = "did not converge"
             if log is not None:
                 log(f"start table  s = {s:5.1f}  w = {w:6.1f}  {time.perf_counter() - t1:5.2f} s  {msg}")
-    meta = {"git_commit": git_commit(), "kite": cfg.kite.name, "config": cfg.to_dict(),
+    meta = {"git_commit": git_commit(), "kite": cfg.kite.name, "config": cfg.to_dict(), "model": fingerprint(cfg),
             "power_line_length_m": float(cfg.dynamics.power_line_length_m), "s_mps": s_values.tolist(),
             "w_mps": w_values.tolist(), "n_points": n_s * n_w, "n_failed": len(failed), "failed": failed,
             "wall_time_s": time.perf_counter() - t0}
