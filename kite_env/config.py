@@ -262,7 +262,6 @@ class SimConfig:
     initial_speed_per_wind: float = 4.4
     fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
     surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name
-    surrogate_fallback: bool = False  # surrogate: a state outside the sampled envelope continues in the FE model
     surrogate_start: str = "table"  # surrogate: the start from the start table (fitted to FE starts), else solved |
     #   fe (solved) | table_only (a start the table lacks fails, so that the env redraws it: training)
 

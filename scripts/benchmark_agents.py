@@ -1,12 +1,12 @@
 """Benchmark the trained agents against the baseline and random actions on held-out seeds (issue 6).
 
     python scripts/benchmark_agents.py --out runs/benchmark [--policies baseline ppo sac random] [--episodes 20]
-        [--seed 1000] [--fidelity surrogate fe] [--duration S] [--recipe configs/agents/ppo.yaml] [--set k=v ...]
+        [--seed 1000] [--fidelity surrogate fe] [--duration S] [--recipe agents/recipes/ppo.yaml] [--set k=v ...]
         [--force] [--learning-curves RUN_DIR [RUN_DIR ...]]
 
 Every policy flies ``--episodes`` episodes through ``kite-eval --compare`` (its policies: ``baseline``, ``random``,
 ``ppo`` / ``sac`` for the shipped models of ``agents/models``, a ``model.zip`` path) with ``--randomize`` and the
-``env`` overrides of the training recipe (the ``KiteFigureEightFast-v0`` entry of ``--recipe``), so each episode
+``env`` overrides of the training recipe (the ``KiteFigureEightFast-v1`` entry of ``--recipe``), so each episode
 draws wind, turbulence and start from the training ranges; episode ``i`` uses ``reset(seed=seed + i)`` (held out:
 training and its evaluations use other seeds). One ``kite-eval`` comparison per fidelity goes into
 ``OUT/<fidelity>/``. A shipped name without its model is left out with a warning.
@@ -35,9 +35,9 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_POLICIES = ("baseline", "ppo", "sac", "random")
-DEFAULT_RECIPE = ROOT / "configs" / "agents" / "ppo.yaml"
+DEFAULT_RECIPE = ROOT / "agents" / "recipes" / "ppo.yaml"
 #: env id of each fidelity (the hyperparameter keys of kite-train)
-ENV_IDS = {"surrogate": "KiteFigureEightFast-v0", "fe": "KiteFigureEight-v0"}
+ENV_IDS = {"surrogate": "KiteFigureEightFast-v1", "fe": "KiteFigureEight-v1"}
 #: rl-baselines3-zoo's benchmark columns, then the physical metrics: (header, key of the row)
 COLUMNS = [("algo", "algo"), ("env_id", "env_id"), ("mean_reward", "mean_reward"), ("std_reward", "std_reward"),
            ("n_timesteps", "n_timesteps"), ("eval_episodes", "eval_episodes"),
@@ -200,7 +200,7 @@ def plot_learning_curves(runs: list[Path], out_png: Path) -> list[str]:
 
 
 def recipe_env(recipe: Path) -> list[str]:
-    """The ``env`` overrides of the recipe's ``KiteFigureEightFast-v0`` entry as ``--set`` strings."""
+    """The ``env`` overrides of the recipe's ``KiteFigureEightFast-v1`` entry as ``--set`` strings."""
     from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters, recipe_overrides
 
     algo = "sac" if recipe.stem == "sac" else "ppo"  # only the env entry is used
@@ -218,7 +218,7 @@ def main(argv=None) -> int:
                    help="wing models to fly (default: surrogate)")
     p.add_argument("--duration", type=float, default=None, help="episode time limit [s] (default: sim.duration_s)")
     p.add_argument("--recipe", type=Path, default=DEFAULT_RECIPE,
-                   help="hyperparameter YAML whose KiteFigureEightFast-v0 env overrides set the conditions")
+                   help="hyperparameter YAML whose KiteFigureEightFast-v1 env overrides set the conditions")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="further config overrides (after the recipe's)")
     p.add_argument("--force", action="store_true", help="replace existing kite-eval folders in OUT")

@@ -22,14 +22,3 @@ def load_script():
 
     return load
 
-
-#: the model the shipped reduced-order wing and agents were built on (configs/legacy_v0.yaml)
-LEGACY_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "legacy_v0.yaml"
-
-
-@pytest.fixture(scope="session")
-def legacy_cfg():
-    """The legacy model's Config: the FE model the shipped reduced-order wing was fitted to."""
-    from kite_env.config import load_config
-
-    return load_config(LEGACY_CONFIG)

@@ -7,7 +7,8 @@ import yaml
 from kite_env.config import Config, ConfigError, config_from_dict, load_config
 from kite_env.frames import from_frame, kite_frame, to_frame
 
-CONFIGS = sorted((Path(__file__).parents[1] / "configs").glob("*.yaml"))  # configs/agents/: tests/test_train_cli.py
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))  # the training recipes (agents/recipes): tests/test_train_cli.py
 
 
 def test_default_yaml_matches_dataclass_defaults():
@@ -110,21 +111,6 @@ def test_kite_frame_rates_in_floats_equal_the_array_formulas():
         kite_frame_rates(base[:3], base[:3])
 
 
-def test_agent_recipes_pin_the_legacy_model_the_fast_fidelity_was_fitted_to():
-    """configs/agents/*.yaml fly the fast fidelity on configs/legacy_v0.yaml's model: every key of that file is
-    pinned by each recipe's env entry, with the same value."""
-    import yaml
-
-    from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters
-
-    root = Path(__file__).resolve().parents[1] / "configs"
-    legacy = yaml.safe_load((root / "legacy_v0.yaml").read_text())
-    flat = {f"{sec}.{k}": v for sec, vals in legacy.items() for k, v in vals.items() if k != "induced_drag"}
-    for algo in ("ppo", "sac"):
-        env = load_hyperparameters(root / "agents" / f"{algo}.yaml", algo, FAST_ENV_ID)["env"]
-        assert {k: env[k] for k in flat} == flat
-
-
 def test_start_speed_can_follow_the_wind():
     from kite_env.config import load_config
 
@@ -137,3 +123,214 @@ def test_start_speed_can_follow_the_wind():
         load_config(None, ["sim.initial_speed_per_wind=-1"])
     with pytest.raises(ConfigError, match="both 0"):
         load_config(None, ["sim.initial_speed_per_wind=0"])
+
+
+def test_default_yaml_lists_the_turbulence_range():
+    """configs/default.yaml lists env.turbulence_intensity_min (with its max: the range drawn per episode); a range
+    whose min exceeds its max is refused."""
+    data = yaml.safe_load((ROOT / "configs" / "default.yaml").read_text())
+    assert data["env"]["turbulence_intensity_min"] == Config().env.turbulence_intensity_min == 0.0
+    assert data["env"]["turbulence_intensity_max"] == Config().env.turbulence_intensity_max
+    cfg = load_config(None, ["env.turbulence_intensity_min=0.05", "env.turbulence_intensity_max=0.1"])
+    assert (cfg.env.turbulence_intensity_min, cfg.env.turbulence_intensity_max) == (0.05, 0.1)
+    with pytest.raises(ConfigError,
+                       match="'env.turbulence_intensity_min' must not exceed 'env.turbulence_intensity_max'"):
+        load_config(None, ["env.turbulence_intensity_min=0.2", "env.turbulence_intensity_max=0.1"])
+
+
+# ---------------------------------------------------------------------------------------------------- model identity
+def test_presets_are_recognised_and_paper_yaml_is_the_paper_preset():
+    """preset_name: the default configuration is 'default', configs/paper.yaml is 'paper' (and holds exactly
+    PRESETS['paper']), any other model is 'custom'; what is not the model (wind, task, run, solver, figure) does not
+    change the name."""
+    from kite_env.config import PRESETS, preset_config, preset_name
+
+    assert set(PRESETS) == {"default", "paper"} and PRESETS["default"] == {}
+    assert preset_name(Config()) == preset_name(load_config(ROOT / "configs" / "default.yaml")) == "default"
+    paper = load_config(ROOT / "configs" / "paper.yaml")
+    assert preset_name(paper) == "paper" and paper == preset_config("paper")
+    assert yaml.safe_load((ROOT / "configs" / "paper.yaml").read_text()) == PRESETS["paper"]
+    assert preset_config("default") == Config()
+    task = ["wind.speed_mps=8", "wind.turbulence_intensity=0.1", "env.max_episode_s=5", "sim.fidelity=surrogate",
+            "fsi.tol_disp_m=2e-4", "trajectory.width_deg=90"]
+    assert preset_name(load_config(None, task)) == "default"
+    assert preset_name(load_config(ROOT / "configs" / "paper.yaml", task)) == "paper"
+    assert preset_name(load_config(None, ["aero.canopy_luffing=false"])) == "custom"
+    assert preset_name(load_config(ROOT / "configs" / "paper.yaml", ["structure.dynamic=true",
+                                                                    "dynamics.tether=rope"])) == "custom"
+    with pytest.raises(ConfigError, match="unknown model preset 'nope'"):
+        preset_config("nope")
+
+
+def test_fingerprint_covers_the_model_sections_only():
+    import json
+
+    from kite_env.config import MODEL_SECTIONS, fingerprint, model_keys
+
+    cfg = Config()
+    fp = fingerprint(cfg)
+    assert set(fp) == {"preset", "fingerprint", "keys"} and fp["preset"] == "default"
+    assert len(fp["fingerprint"]) == 16 and int(fp["fingerprint"], 16) >= 0
+    d = cfg.to_dict()
+    assert fp["keys"] == model_keys(cfg) == {f"{s}.{k}": v for s in MODEL_SECTIONS for k, v in d[s].items()}
+    assert set(MODEL_SECTIONS) == {"kite", "structure", "aero", "dynamics", "control"}
+    same = load_config(None, ["wind.speed_mps=8", "env.max_episode_s=5", "sim.fidelity=surrogate",
+                              "fsi.max_newton_iter=40", "trajectory.elevation_deg=30"])
+    assert fingerprint(same) == fp
+    for key in ("dynamics.winch_force_N=10000", "kite.n_sections=21", "control.k2=2", "aero.damping=eq3",
+                "structure.rho_inf=0.5"):
+        other = fingerprint(load_config(None, [key]))
+        assert other["fingerprint"] != fp["fingerprint"] and other["preset"] == "custom", key
+    assert fingerprint(load_config(ROOT / "configs" / "paper.yaml"))["preset"] == "paper"
+    assert json.loads(json.dumps(fp)) == fp  # stored as JSON with every artefact
+
+
+def test_check_model_names_the_keys_that_differ():
+    import json
+
+    from kite_env.config import ModelMismatch, check_model, fingerprint
+
+    cfg = Config()
+    check_model(json.loads(json.dumps(fingerprint(cfg))), cfg, "wing 'w.npz'")  # the same model: no error
+    check_model(fingerprint(cfg), load_config(None, ["wind.speed_mps=9", "sim.fidelity=surrogate"]), "w")
+    other = load_config(None, ["dynamics.winch_force_N=10000"])
+    with pytest.raises(ModelMismatch) as err:
+        check_model(fingerprint(cfg), other, "wing 'w.npz'")
+    msg = str(err.value)
+    assert msg.startswith("wing 'w.npz' was made with model 'default'") and "not this one 'custom'" in msg
+    assert "1 key(s) differ: dynamics.winch_force_N (15000.0 there, 10000.0 here)" in msg
+    assert isinstance(err.value, ConfigError)
+    paper = load_config(ROOT / "configs" / "paper.yaml")
+    with pytest.raises(ModelMismatch, match=r"9 key\(s\) differ: aero\.canopy_luffing \(True there, False here\), "
+                                            r".*structure\.dynamic \(True there, False here\) and 1 more"):
+        check_model(fingerprint(cfg), paper, "agent")
+    # a key that one side does not have (a record of an older key set)
+    rec = fingerprint(cfg)
+    rec["keys"] = {k: v for k, v in rec["keys"].items() if k != "control.k2"} | {"control.old_gain": 1.0}
+    with pytest.raises(ModelMismatch, match=r"control\.k2 \('<absent>' there, 3\.0 here\), control\.old_gain "
+                                            r"\(1\.0 there, '<absent>' here\)"):
+        check_model(rec, cfg, "agent")
+    for record in (None, {}, {"preset": "default", "fingerprint": fingerprint(cfg)["fingerprint"]}):
+        with pytest.raises(ModelMismatch, match="agent records no model"):
+            check_model(record, cfg, "agent")
+
+
+
+def test_the_shipped_recipes_train_on_the_default_model():
+    """agents/recipes/*.yaml set the task (conditions, starts) and no model key: the fast fidelity they train flies
+    the default model, the one the shipped reduced-order wing belongs to."""
+    from kite_env.cli.train import FAST_ENV_ID, default_recipe, load_hyperparameters, recipe_overrides
+    from kite_env.config import fingerprint
+
+    for algo in ("ppo", "sac"):
+        over = recipe_overrides(load_hyperparameters(default_recipe(algo), algo, FAST_ENV_ID))
+        assert over and fingerprint(load_config(None, over)) == fingerprint(Config()), algo
+
+# ---------------------------------------------------------------------------------------------------- randomised
+#: a value of each randomised quantity and the ranges it pins when given alone
+PINS = {
+    "wind.speed_mps": (8.0, {"env.wind_speed_min_mps": 8.0, "env.wind_speed_max_mps": 8.0}),
+    "wind.turbulence_intensity": (0.1, {"env.turbulence_intensity_min": 0.1, "env.turbulence_intensity_max": 0.1}),
+    "sim.initial_speed_mps": (25.0, {"env.initial_speed_min_mps": 25.0, "env.initial_speed_max_mps": 25.0,
+                                     "env.initial_speed_per_wind_min": 0.0, "env.initial_speed_per_wind_max": 0.0}),
+    "sim.initial_speed_per_wind": (4.2, {"env.initial_speed_per_wind_min": 4.2, "env.initial_speed_per_wind_max": 4.2}),
+}
+
+
+def _get(cfg, key):
+    s, k = key.split(".")
+    return getattr(getattr(cfg, s), k)
+
+
+def _nested(flat):
+    out = {}
+    for key, v in flat.items():
+        s, k = key.split(".")
+        out.setdefault(s, {})[k] = v
+    return out
+
+
+def test_every_randomised_quantity_is_listed_with_its_ranges():
+    from kite_env.config import RANDOMISED
+
+    assert set(RANDOMISED) == set(PINS)
+    for key, ranges in RANDOMISED.items():
+        assert set(ranges) == set(PINS[key][1]), key
+
+
+@pytest.mark.parametrize("key", sorted(PINS))
+def test_a_randomised_quantity_given_alone_pins_its_range(key, tmp_path):
+    """Given without its range in one layer (a dict, the overrides, a config file) the value is flown: its range is
+    pinned to it (the start speed in m/s also clears the range per m/s of wind)."""
+    value, pinned = PINS[key]
+    f = tmp_path / "c.yaml"
+    f.write_text(yaml.safe_dump(_nested({key: value})))
+    for cfg in (config_from_dict(_nested({key: value})), load_config(None, [f"{key}={value}"]), load_config(f)):
+        assert _get(cfg, key) == value
+        for r, v in pinned.items():
+            assert _get(cfg, r) == v, (key, r)
+    # the default ranges are not those values: the pin did something
+    assert any(_get(Config(), r) != v for r, v in pinned.items())
+
+
+#: a range of each randomised quantity, given with it
+RANGES = {
+    "wind.speed_mps": {"env.wind_speed_min_mps": 4.0, "env.wind_speed_max_mps": 10.0},
+    "wind.turbulence_intensity": {"env.turbulence_intensity_min": 0.0, "env.turbulence_intensity_max": 0.15},
+    "sim.initial_speed_mps": {"env.initial_speed_min_mps": 20.0, "env.initial_speed_max_mps": 30.0,
+                              "env.initial_speed_per_wind_min": 0.0, "env.initial_speed_per_wind_max": 0.0},
+    "sim.initial_speed_per_wind": {"env.initial_speed_per_wind_min": 4.0, "env.initial_speed_per_wind_max": 4.8},
+}
+
+
+@pytest.mark.parametrize("key", sorted(PINS))
+def test_a_randomised_quantity_given_with_its_range_does_not_pin_it(key):
+    """Given together with its range in the same layer the range is the one given; given with one key of its range,
+    the rest of the range keeps its value (nothing is pinned)."""
+    value, pinned = PINS[key]
+    rng = RANGES[key]
+    assert set(rng) == set(pinned)
+    cfg = config_from_dict(_nested({key: value, **rng}))
+    assert _get(cfg, key) == value and all(_get(cfg, r) == v for r, v in rng.items())
+    cfg = load_config(None, [f"{key}={value}", *(f"{r}={v}" for r, v in rng.items())])
+    assert _get(cfg, key) == value and all(_get(cfg, r) == v for r, v in rng.items())
+    base = Config()
+    for r, v in rng.items():
+        layer = _nested({key: value, r: v})
+        if key == "sim.initial_speed_per_wind":
+            # not pinned: one bound of the range per m/s of wind set, the other left at 0, is refused
+            with pytest.raises(ConfigError, match="initial_speed_per_wind"):
+                config_from_dict(layer)
+            continue
+        cfg = config_from_dict(layer)
+        assert _get(cfg, r) == v, (key, r)
+        for other in rng:
+            if other != r:
+                assert _get(cfg, other) == _get(base, other), (key, r, other)
+
+
+def test_pins_apply_per_layer():
+    f_cfg = {"wind": {"speed_mps": 8.0}}
+    cfg = config_from_dict({"env": {"wind_speed_max_mps": 10.0}}, config_from_dict(f_cfg))
+    assert (cfg.wind.speed_mps, cfg.env.wind_speed_min_mps, cfg.env.wind_speed_max_mps) == (8.0, 8.0, 10.0)
+    # a start speed of 0 follows the wind (sim.initial_speed_per_wind): nothing to pin
+    cfg = load_config(None, ["sim.initial_speed_mps=0"])
+    assert (cfg.env.initial_speed_min_mps, cfg.env.initial_speed_max_mps) == (22.0, 22.0)
+
+
+@pytest.mark.parametrize("overrides", ["wind.speed_mps=8", b"wind.speed_mps=8", {"wind.speed_mps": 8}, 8],
+                         ids=["str", "bytes", "dict", "int"])
+def test_overrides_must_be_a_list_of_strings(overrides):
+    """Overrides given as one string (or bytes, a dict, a number) raise one ConfigError that says what is expected,
+    from load_config and from the environment's constructor; not a ConfigError per character."""
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    for make in (lambda: load_config(None, overrides), lambda: KiteFigureEightEnv(overrides=overrides)):
+        with pytest.raises(ConfigError, match="overrides must be a list of 'section.key=value' strings") as err:
+            make()
+        assert str(err.value).count("overrides must be") == 1
+    if isinstance(overrides, str):
+        with pytest.raises(ConfigError, match="wrap a single override in a list"):
+            load_config(None, overrides)
+    with pytest.raises(ConfigError, match="override 8 must be a string"):
+        load_config(None, [8])

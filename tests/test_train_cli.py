@@ -385,3 +385,34 @@ def test_linear_schedules():
     for bad in ("linear_3e-4", "lin_x", "lin_"):
         with pytest.raises(train_cli.UsageError, match="learning_rate: expected a number or 'lin_<number>'"):
             train_cli.schedules({"learning_rate": bad})
+
+
+@pytest.mark.slow  # two processes, each importing torch and training two tiny trials: ~30-60 s
+def test_two_optimize_workers_add_trials_to_one_sqlite_study(tmp_path):
+    """``kite-train --optimize`` in two processes on one SQLite study: both add trials (each records its worker), the
+    study holds all of them, and the best trial is written as a recipe that kite-train reads."""
+    import subprocess
+    import sys
+
+    import optuna
+
+    recipe = tmp_path / "recipe.yaml"
+    recipe.write_text(yaml.safe_dump({"default": {"checkpoint_freq": 10**6, "eval_freq": 32, "eval_episodes": 1},
+                                      "KiteFigureEightFast-v1": {"n_envs": 2, "vec_env": "batched"}}))
+    out = tmp_path / "study"
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    cmd = [sys.executable, "-m", "kite_env.cli.train", "--algo", "ppo", "--optimize", "--timesteps", "64",
+           "--n-trials", "2", "--storage", storage, "--study-name", "two-workers", "--recipe", str(recipe),
+           "--out", str(out), "--set", "env.max_episode_s=0.2"]
+    procs = [subprocess.Popen([*cmd, "--seed", str(seed)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True) for seed in (0, 100)]
+    logs = [p.communicate(timeout=600)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], logs
+    study = optuna.load_study(study_name="two-workers", storage=storage)
+    assert len(study.trials) == 4
+    workers = {t.user_attrs["worker"] for t in study.trials}
+    assert len(workers) == 2
+    best = yaml.safe_load((out / "best_recipe.yaml").read_text())
+    assert best["KiteFigureEightFast-v1"]["learning_rate"] == study.best_trial.params["learning_rate"]
+    hp = train_cli.load_hyperparameters(out / "best_recipe.yaml", "ppo", train_cli.FAST_ENV_ID)
+    assert hp["n_steps"] == study.best_trial.params["n_steps"] and hp["n_envs"] == 2

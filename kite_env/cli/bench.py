@@ -2,7 +2,7 @@
 
 Prints a table and writes ``DIR/bench.json`` as ``{"fe": {"env_steps_per_s": ..., "real_time_factor": ...},
 "surrogate": {...}, "batched": {"n_kites": 64, "kite_steps_per_s": ...}}`` (``fe``: the aeroelastic FE wing;
-``surrogate``: the reduced-order wing, ``KiteFigureEightFast-v0``; ``batched``: the vector env of the surrogate
+``surrogate``: the reduced-order wing, ``KiteFigureEightFast-v1``; ``batched``: the vector env of the surrogate
 fidelity, all kites in one process)
 (real-time factor = wall seconds per simulated second, as ``kite-eval``; below 1 is faster than real time). The env
 is reset (timed separately) and then stepped with the paper's controller, so that the flight is the one users see;
@@ -21,7 +21,7 @@ from kite_env.config import ConfigError
 
 
 def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe", config=None) -> dict:
-    """Time ``n_steps`` env steps of KiteFigureEight-v0 in ``fidelity`` driven by the baseline agent (``config``: a
+    """Time ``n_steps`` env steps of KiteFigureEight-v1 in ``fidelity`` driven by the baseline agent (``config``: a
     YAML path or None for the defaults, then ``overrides``)."""
     from agents.baseline import BaselineAgent
     from kite_env.envs.figure_eight import KiteFigureEightEnv
@@ -62,7 +62,7 @@ def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: in
 
     import kite_env  # noqa: F401  (registers the envs)
 
-    env = gym.make_vec("KiteFigureEightFast-v0", num_envs=n_kites, vectorization_mode="vector_entry_point",
+    env = gym.make_vec("KiteFigureEightFast-v1", num_envs=n_kites, vectorization_mode="vector_entry_point",
                        config=config, overrides=list(overrides))
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)

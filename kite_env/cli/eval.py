@@ -7,7 +7,7 @@ Examples::
     kite-eval --policy random | constant:0 | runs/ppo/model.zip --episodes 3 --out runs/random
     kite-eval --compare baseline random constant:0 runs/ppo/model.zip --episodes 2 --out runs/compare
 
-Every policy flies through the Gymnasium environment ``KiteFigureEight-v0`` (:func:`kite_env.flight.run_episode`):
+Every policy flies through the Gymnasium environment ``KiteFigureEight-v1`` (:func:`kite_env.flight.run_episode`):
 ``baseline`` (the paper's controller), ``random``, ``constant:<a>`` (a normalised action in [-1, 1]) or the path
 of a model saved by ``kite-train`` (:mod:`agents.policies`). By default an episode flies the configured conditions
 (the ``wind`` section as it is, start at the crossing of the figure-eight, ``env.randomize = false``); episode ``i``

@@ -132,7 +132,7 @@ def _start_table(args) -> int:
     return 0
 
 
-def _agreement(args) -> int:
+def _agreement(args, base) -> int:
     from kite_env.surrogate.agreement import FLIGHTS, Flight, agreement_table, run_agreement
 
     flights = FLIGHTS
@@ -140,7 +140,7 @@ def _agreement(args) -> int:
         flights = (Flight("5 m/s, 20 s", 5.0, 0.0, 20.0), Flight("8 m/s, turbulence 0.1, 20 s", 8.0, 0.1, 20.0))
         args.episodes, args.duration = min(args.episodes, 4), min(args.duration, 5.0)
     res = run_agreement(args.out, args.surrogate, args.episodes, args.seed, args.duration, flights, args.jobs,
-                        log=lambda m: print(m, flush=True))
+                        base=base, log=lambda m: print(m, flush=True))
     print(agreement_table(res), end="")
     ok = all(r["ok"] for r in res["flights"]) and res["random"]["ok"]
     print(f"kite-fit: agreement {'holds' if ok else 'does not hold'} -> {args.out / 'agreement.md'}")
@@ -185,6 +185,8 @@ def main(argv=None) -> int:
     g.add_argument("--jobs", type=int, default=1)
     g.add_argument("--quick", action="store_true", help="short flights (20 s, 2 winds, 4 episodes of 5 s): a check "
                    "of the command, not of the agreement")
+    g.add_argument("--config", default=None)
+    g.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     args = p.parse_args(argv)
     from kite_env.config import ConfigError
 
@@ -195,7 +197,7 @@ def main(argv=None) -> int:
         if args.cmd == "start-table":
             return _start_table(args)
         if args.cmd == "agreement":
-            return _agreement(args)
+            return _agreement(args, over)
     except (ConfigError, FileNotFoundError, ValueError) as exc:
         print(f"kite-fit: error: {exc}", file=sys.stderr)
         return 2

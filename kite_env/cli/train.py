@@ -269,7 +269,7 @@ def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: s
 
         try:
             venv = SB3VecEnv(KiteFigureEightVectorEnv(n_envs, config=cfg, fidelity=None))
-        except ValueError as exc:  # not the surrogate fidelity, or sim.surrogate_fallback
+        except ValueError as exc:  # not the surrogate fidelity
             raise UsageError(f"--vec-env batched: {exc}") from None
     else:
         if kind == "subproc":
@@ -531,6 +531,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wing model of the training env: surrogate (the reduced-order wing, KiteFigureEightFast-v1; "
                         "the default) or fe (the aeroelastic FE wing, KiteFigureEight-v1, about 100x slower)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT/checkpoints")
+    p.add_argument("--optimize", action="store_true", help="hyperparameter search: run --n-trials trials of the "
+                   "Optuna study --study-name in --storage, each of --timesteps (kite_env.cli.optimize)")
+    p.add_argument("--storage", default=None, help="--optimize: the study's RDB URL (default sqlite:///OUT/study.db; "
+                   "postgresql://... or mysql://... to share it across machines)")
+    p.add_argument("--study-name", default=None, help="--optimize: the study (default kite-<algo>)")
+    p.add_argument("--n-trials", type=int, default=10, help="--optimize: trials this process runs (default 10)")
     p.add_argument("--force", action="store_true", help="train into a non-empty OUT")
     return p
 
@@ -542,8 +548,17 @@ def main(argv=None) -> int:
         return 2
     from kite_env.dynamics.simulator import NumericalFailure
 
+    if args.optimize and args.n_trials < 1:
+        print(f"kite-train: error: --n-trials must be at least 1, got {args.n_trials}", file=sys.stderr)
+        return 2
     try:
-        path = train(args)
+        if args.optimize:
+            from kite_env.cli.optimize import optimize
+
+            args.study_name = args.study_name or f"kite-{args.algo}"
+            path = optimize(args)
+        else:
+            path = train(args)
     except (UsageError, ConfigError) as exc:
         print(f"kite-train: error: {exc}", file=sys.stderr)
         return 2

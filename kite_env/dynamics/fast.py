@@ -683,19 +683,18 @@ class SurrogateFlightSimulator(FlightSimulator):
     start : {"table", "fe", "table_only"}
     start_table : StartTable, optional (default: the shipped one, or the one next to ``surrogate_path``; without
         one the start is solved with the FE wing)
-    on_outside : {"error", "fe"}
-        A state beyond the sampled envelope raises :class:`SimulationError` ("outside surrogate envelope"), or the
-        kite continues in the full model from there (``"fe"``, :attr:`fallback_t` says when).
+
+    A state beyond the sampled envelope raises :class:`SimulationError` ("outside surrogate envelope", the inputs
+    named): the wing with inertia's state cannot be rebuilt from the fast state, so the flight does not go on in the
+    full model.
     """
 
-    def __init__(self, cfg, wind, surrogate=None, wing=None, start: str = "table", on_outside: str = "error",
-                 start_table=None, surrogate_path=None):
+    def __init__(self, cfg, wind, surrogate=None, wing=None, start: str = "table", start_table=None,
+                 surrogate_path=None):
         from kite_env.polar import nominal_wing
 
         if start not in ("table", "fe", "table_only"):
             raise ValueError(f"start must be 'table', 'fe' or 'table_only', got {start!r}")
-        if on_outside not in ("error", "fe"):
-            raise ValueError(f"on_outside must be 'error' or 'fe', got {on_outside!r}")
         self.cfg, self.wind, self.backend = cfg, wind, "numba"
         self.wing = wing if wing is not None else nominal_wing(cfg.kite.name, cfg)
         if surrogate is None:
@@ -712,7 +711,6 @@ class SurrogateFlightSimulator(FlightSimulator):
         if start == "table_only" and self.start_table is None:
             raise ValueError("start 'table_only' needs a start table; the surrogate has none")
         self.start_mode = start if self.start_table is not None else "fe"
-        self.on_outside = on_outside
         self.dt = cfg.dynamics.dt_s
         q0 = self.wing.design_bridle
         self.tip_lengths = np.array([np.linalg.norm(q0[0] - q0[1]), np.linalg.norm(q0[2] - q0[3])])
@@ -721,13 +719,9 @@ class SurrogateFlightSimulator(FlightSimulator):
         self.state = None
         self.t = 0.0
         self.L_B0 = self.L_D0 = None
-        self.fallback_t = None
-        self._fe = None
         self.fe_starts = 0  # starts solved with the FE wing (no start table, or none at that start)
 
-    @property
-    def fidelity_now(self) -> str:
-        return "surrogate" if self._fe is None else "fe"
+    fidelity_now = "surrogate"
 
     def _start_wing(self, X):
         """The start from the table; where the table has no converged cell (its grid points next to the query did not
@@ -759,55 +753,24 @@ class SurrogateFlightSimulator(FlightSimulator):
         ks.set_kite(0, self.state.r, self.state.v, self.t, self.pair_stiffness, self.L_B0, self.L_D0)
         ks.tether_force[0] = np.nan
         ks.evaluate()
-        self.fallback_t = None
-        self._fe = None
-        self._raise_status(at_start=True)
+        self._raise_status()
         return self._record()
 
-    def _raise_status(self, at_start: bool = False):
+    def _raise_status(self):
         st = int(self.kites.status[0])
         if st == NON_FINITE:
             raise SimulationError("non-finite particle state", f"t = {self.kites.t[0]:.4f} s")
         if st == OUTSIDE:
-            names = ", ".join(self.kites.outside(0))
-            if self.on_outside == "fe" and not at_start:
-                self._switch_to_fe()
-                return
-            raise SimulationError("outside surrogate envelope", names)
-
-    def _switch_to_fe(self):
-        """Continue this flight in the full model from the current state (cold FE wing solve there)."""
-        fe = FlightSimulator(self.cfg, self.wind, self.wing)
-        fe.particles = ParticleSystem(self.cfg.dynamics, self.tip_lengths, self.pair_stiffness,
-                                      self.cfg.aero.rho_kg_m3)
-        fe.pair_stiffness = self.pair_stiffness
-        fe.L_B0, fe.L_D0 = self.L_B0, self.L_D0
-        fe.particles.set_steering(float(self.kites.rest[0, 1]), float(self.kites.rest[0, 3]))
-        fe.state = ParticleState(self.kites.r[0].copy(), self.kites.v[0].copy())
-        fe.t = float(self.kites.t[0])
-        fe.tether_length, fe.reel_speed, fe._t_step = (float(self.kites.tether_length[0]),
-                                                        float(self.kites.reel_speed[0]), fe.t)
-        self.wing.reset()
-        self._fe_rec = fe._solve_wing(first=True)
-        self._fe = fe
-        self.fallback_t = fe.t
+            raise SimulationError("outside surrogate envelope", ", ".join(self.kites.outside(0)))
 
     def step(self, L_B: float, L_D: float):
         if self.L_B0 is None:
             raise RuntimeError("call reset() before step()")
         if not (L_B > 0 and L_D > 0 and math.isfinite(L_B) and math.isfinite(L_D)):
             raise ValueError(f"steering-line rest lengths must be positive and finite, got {L_B!r}, {L_D!r}")
-        if self._fe is not None:
-            rec = self._fe.step(L_B, L_D)
-            self.state, self.t = rec.state, rec.t
-            return rec
         self.kites.step(L_B, L_D)
         if self.kites.status[0] != OK:
             self._raise_status()
-        if self._fe is not None:  # switched to the full model at this state: its cold wing solve there
-            rec = self._fe_rec
-            rec.tether_force = float(self.kites.tether_force[0])
-        else:
-            rec = self._record()
+        rec = self._record()
         self.state, self.t = rec.state, rec.t
         return rec

@@ -92,8 +92,7 @@ def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
 
         sw, path = surrogate_for(cfg)
         return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=path,
-                                        start=cfg.sim.surrogate_start,
-                                        on_outside="fe" if cfg.sim.surrogate_fallback else "error")
+                                        start=cfg.sim.surrogate_start)
     if cfg.structure.dynamic:
         from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
 
@@ -117,7 +116,7 @@ class FlightSimulator:
         :func:`kite_env.structure.kernels.resolve_backend`.
     """
 
-    #: the wing model now flying (the fast fidelity reports "fe" after a fallback)
+    #: the wing model flying: "fe" here, "surrogate" in the fast fidelity
     fidelity_now = "fe"
     #: A-D are particles that carry the quasi-static wing's reaction: the start measures the wing's stiffness between
     #: them for the tip dampers and condenses the wing's distributed mass onto them (False: the wing with inertia,

@@ -1,4 +1,4 @@
-"""``KiteFigureEight-v0``: fly the aeroelastic kite along the figure-eight (Gymnasium environment).
+"""``KiteFigureEight-v1``: fly the aeroelastic kite along the figure-eight (Gymnasium environment).
 
 The environment wraps the complete coupled model of :mod:`kite_env.dynamics.simulator` (static aeroelastic wing
 solved at every time step inside the particle system of wing masses, bridle, KCU and tether). Nothing in the physics
@@ -94,8 +94,10 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Description
 
-    The full aeroelastic model of Bosch et al. (static nonlinear FE wing with Breukels' aerodynamics, solved at every
-    physics step inside a particle model of wing masses, bridle lines, kite control unit and an 80 m tether). The
+    The full aeroelastic model of Bosch et al.: a nonlinear FE wing (shell canopy, inflated-beam tubes) with Breukels'
+    section aerodynamics, integrated in time with its own and its added mass (the wing with inertia; the paper's
+    quasi-static wing with ``structure.dynamic=false``), coupled at the bridle points to a particle model of the kite
+    control unit, the bridle lines and an 80 m tether held by a ground station that reels out above 15 kN. The
     agent sets the desired steering-line length difference; the paper's inner steering-line loops (Eq. 16-17) and,
     by default, its force controller (Eq. 18-19) turn it into rest lengths of the steering lines. The task is to fly
     the Bernoulli lemniscate on the unit sphere (``trajectory`` section of the config) with a high traction force.
@@ -104,7 +106,9 @@ class KiteFigureEightEnv(gym.Env):
 
     ``Box(-1, 1, (1,), float32)``: desired ``dl* = l_B - l_D`` divided by ``control.delta_l_max_m`` (1.5 m by
     default). ``dl* < 0`` pulls the right steering line and turns the kite to its right. The action is held for
-    ``control.control_dt_s`` (0.02 s, four physics steps of ``dynamics.dt_s``).
+    ``control.control_dt_s`` (0.02 s, four physics steps of ``dynamics.dt_s``); the steering actuator follows it at
+    up to ``control.line_speed_max_mps`` (2 m/s). An action is one finite number (shape ``(1,)``, ``()`` or any
+    shape with one element; anything else is a ``ValueError``); values beyond [-1, 1] are clipped to it.
 
     ## Observation Space
 
@@ -135,9 +139,11 @@ class KiteFigureEightEnv(gym.Env):
 
     The KCU at the crossing of the figure-eight (or, with ``env.random_start``, a path point drawn uniformly in the
     path parameter among those whose geodesic curvature is at most ``env.start_curvature_max`` in magnitude), flying
-    along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]``; the wing in
-    static aeroelastic equilibrium on its bridle. Wind speed, turbulence intensity and turbulence realisation are drawn
-    from ``self.np_random`` (ranges in the ``env`` section). With ``env.randomize = false`` nothing is drawn: the
+    along the path at a speed drawn from ``[env.initial_speed_min_mps, env.initial_speed_max_mps]`` (or that many
+    times the wind: ``env.initial_speed_per_wind_min/_max``); the wing in static aeroelastic equilibrium on its bridle.
+    Wind speed, turbulence intensity and turbulence realisation are drawn from ``self.np_random`` (ranges in the
+    ``env`` section). A quantity given without its range (``overrides=["wind.speed_mps=8"]``) is flown at that value:
+    its range is pinned to it (:data:`kite_env.config.RANDOMISED`). With ``env.randomize = false`` nothing is drawn: the
     ``wind`` section as configured, the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``) (``kite-eval``).
     ``reset(options={"wind_seed": n})`` fixes the turbulence realisation.
 
@@ -156,21 +162,23 @@ class KiteFigureEightEnv(gym.Env):
 
     ## Arguments
 
-    ``gymnasium.make("KiteFigureEight-v0", config=None, overrides=(), render_mode=None, wing=None, fidelity=None)``:
+    ``gymnasium.make("KiteFigureEight-v1", config=None, overrides=(), render_mode=None, wing=None, fidelity=None)``:
     ``config`` is a :class:`kite_env.config.Config`, a nested dict or the path of a YAML file; ``overrides`` are
     ``"section.key=value"`` strings applied on top; ``wing`` an :class:`kite_env.fsi.AeroelasticWing` to reuse;
     ``fidelity`` ``"fe"`` (the aeroelastic FE wing) or ``"surrogate"`` (the reduced-order wing fitted to it,
-    :mod:`kite_env.surrogate`; overrides ``sim.fidelity``). ``KiteFigureEightFast-v0`` is this env with
+    :mod:`kite_env.surrogate`; overrides ``sim.fidelity``). ``KiteFigureEightFast-v1`` is this env with
     ``fidelity="surrogate"``. In the surrogate fidelity a state beyond the sampled envelope ends the episode
-    (``termination_reason`` "outside surrogate envelope", the inputs named in ``info["termination_detail"]``) or,
-    with ``sim.surrogate_fallback``, continues in the FE model (``info["fidelity"]`` says which model flies).
+    (``termination_reason`` "outside surrogate envelope", the inputs named in ``info["termination_detail"]``).
     ``render_mode`` is ``"rgb_array"`` (flight path and deformed wing as a uint8 image) or ``"human"`` (the same in
     a matplotlib window); the surrogate fidelity draws the design wing.
 
     ## Version History
 
-    * v0: first version (full aeroelastic fidelity); the ``fidelity`` argument and ``KiteFigureEightFast-v0``
-      (reduced-order wing) added without changing the full-fidelity dynamics.
+    * v1: the flying model: the wing with inertia, the rope tether, the steering actuator's speed limit and the
+      ground station's force limit; ``KiteFigureEightFast-v1``'s reduced-order wing fitted to it (with a latent
+      state); action +-1 is +-1.5 m of steering; a randomised quantity given without its range is flown at that value.
+    * v0 (removed): the model before it flew (the quasi-static wing with Eq. 3 as printed, a rod tether of constant
+      length, action +-1 = +-0.25 m), in which every flight ended within seconds.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}

@@ -1,4 +1,4 @@
-"""``KiteFigureEightFast-v0`` batched: ``num_envs`` kites of the fast fidelity advanced together in one process.
+"""``KiteFigureEightFast-v1`` batched: ``num_envs`` kites of the fast fidelity advanced together in one process.
 
 :class:`KiteFigureEightVectorEnv` is a :class:`gymnasium.vector.VectorEnv` whose kites live in ONE
 :class:`kite_env.dynamics.fast.SurrogateKites`: every physics step is one compiled call over all kites, the
@@ -19,9 +19,8 @@ operations. Per kite it is the single environment :class:`~kite_env.envs.figure_
   {"reset_mask": mask})`` resets only the masked kites (and clears their pending autoreset).
 
 With the same seeds and actions the batch gives the trajectories of ``SyncVectorEnv`` over single
-``KiteFigureEightFast-v0`` envs (``tests/envs/test_vector.py``). ``info`` is a dict of arrays with ``_key`` masks
-(Gymnasium's vector convention). Not supported in the batch: rendering, the flight recorder, and
-``sim.surrogate_fallback`` (a kite continuing in the FE model).
+``KiteFigureEightFast-v1`` envs (``tests/envs/test_vector.py``). ``info`` is a dict of arrays with ``_key`` masks
+(Gymnasium's vector convention). Not supported in the batch: rendering and the flight recorder.
 
 :class:`SB3VecEnv` adapts the batch to stable-baselines3's ``VecEnv`` (reset at episode end in the same step,
 ``terminal_observation`` in ``infos``). :func:`make_vector_env` is the ``vector_entry_point`` of both env ids.
@@ -55,7 +54,7 @@ _GROUND, _SLACK, _NON_FINITE, _OUTSIDE, _NON_FINITE_OBS = 1, 2, 3, 4, 5
 
 
 class KiteFigureEightVectorEnv(VectorEnv):
-    """``num_envs`` kites of ``KiteFigureEight-v0`` in the fast fidelity, stepped as one batch (module docstring).
+    """``num_envs`` kites of ``KiteFigureEight-v1`` in the fast fidelity, stepped as one batch (module docstring).
 
     Parameters
     ----------
@@ -79,8 +78,6 @@ class KiteFigureEightVectorEnv(VectorEnv):
         if cfg.sim.fidelity != "surrogate":
             raise ValueError(f"the batched environment needs sim.fidelity 'surrogate', got {cfg.sim.fidelity!r} "
                              "(use gymnasium.vector.SyncVectorEnv for the FE model)")
-        if cfg.sim.surrogate_fallback:
-            raise ValueError("sim.surrogate_fallback (continuing a kite in the FE model) is not supported in the batch")
         n = self.num_envs = int(num_envs)
         self.cfg = cfg
         self.render_mode = None
@@ -292,14 +289,14 @@ class KiteFigureEightVectorEnv(VectorEnv):
 
 def make_vector_env(num_envs: int = 1, config=None, overrides=(), render_mode=None, wing=None, fidelity=None,
                     **kwargs):
-    """``vector_entry_point`` of ``KiteFigureEight-v0`` and ``KiteFigureEightFast-v0``: the batched
+    """``vector_entry_point`` of ``KiteFigureEight-v1`` and ``KiteFigureEightFast-v1``: the batched
     :class:`KiteFigureEightVectorEnv` for the surrogate fidelity, a :class:`gymnasium.vector.SyncVectorEnv` of
     single envs for the FE model (or with rendering)."""
     kwargs.pop("max_episode_steps", None)  # the env truncates itself (env.max_episode_s)
     if kwargs:
         raise TypeError(f"unexpected arguments {sorted(kwargs)}")
     cfg = resolve_config(config, overrides, fidelity)
-    if cfg.sim.fidelity == "surrogate" and render_mode is None and not cfg.sim.surrogate_fallback:
+    if cfg.sim.fidelity == "surrogate" and render_mode is None:
         return KiteFigureEightVectorEnv(num_envs, config=cfg, wing=wing, fidelity=None)
     return gym.vector.SyncVectorEnv([lambda: KiteFigureEightEnv(config=cfg, render_mode=render_mode, wing=wing)
                                      for _ in range(num_envs)])

@@ -1,8 +1,10 @@
-"""Reduced-order wing (the fast fidelity): samples of the full aeroelastic wing, the MLP fitted to them
-(:mod:`.model`) and the start table of the reset (:mod:`.start`).
+"""Reduced-order wing (the fast fidelity): flights of the full model recorded step by step (:mod:`.trajectories`),
+the wing fitted to them (:mod:`.fit`, :mod:`.model`), the start table of the reset (:mod:`.start`) and the agreement
+of the two fidelities over whole flights (:mod:`.agreement`).
 
-The fitted files of a kite ship in ``kite_env/surrogate/data/`` as ``<kite>.npz`` (weights with provenance and
-held-out errors) and ``<kite>_start.npz`` (start table); ``scripts/build_surrogate.py`` regenerates both.
+The fitted files of a kite ship in ``kite_env/surrogate/data/`` as ``<kite>.npz`` (weights with the model they were
+fitted to, provenance and held-out errors) and ``<kite>_start.npz`` (start table); ``kite-fit`` makes both for any
+model. A wing or start table made with another model than the one asked for is refused (:func:`surrogate_for`).
 """
 
 from __future__ import annotations
@@ -20,8 +22,7 @@ def _path(kite_name: str, suffix: str, what: str) -> Path:
     path = DATA_DIR / f"{kite_name}{suffix}.npz"
     if not path.is_file():
         raise FileNotFoundError(f"no shipped reduced-order wing {what} for kite '{kite_name}' ({path} missing; "
-                                f"shipped kites: {_shipped() or 'none'}); build one with scripts/build_surrogate.py "
-                                "--out-dir runs/surrogate --install")
+                                f"shipped kites: {_shipped() or 'none'}); make one with kite-fit (sample, fit, start-table)")
     return path
 
 

@@ -1,10 +1,11 @@
-"""Reduced-order wing: a small MLP fitted to samples of the full aeroelastic wing (:mod:`.samples`).
+"""Reduced-order wing: a small MLP fitted to the full aeroelastic wing (:mod:`.fit`).
 
-:class:`SurrogateWing` maps the 30 inputs of :data:`~kite_env.surrogate.samples.INPUT_NAMES` to the 17 outputs of
-:data:`~kite_env.surrogate.samples.OUTPUT_NAMES` with a tanh multilayer perceptron on normalised inputs and
-outputs. Inference is plain NumPy (batched over rows); the weights are fitted with torch by
-``scripts/train_surrogate.py`` and stored as ``.npz`` with their provenance (the samples' git commit, config, mesh
-and count, the training settings and the held-out errors).
+:class:`SurrogateWing` maps the 30 inputs of :data:`~kite_env.surrogate.samples.INPUT_NAMES` (and, for a wing with
+memory, its filtered inputs) to the 17 outputs of :data:`~kite_env.surrogate.samples.OUTPUT_NAMES`: a tanh
+multilayer perceptron on normalised inputs and outputs plus a known linear part of the bridle force (``K_b``).
+Inference is plain NumPy (batched over rows) here and compiled in the fast fidelity
+(:mod:`kite_env.dynamics.fast`); the weights are fitted with torch by ``kite-fit fit`` and stored as ``.npz`` with
+the model they belong to (:func:`kite_env.config.fingerprint`), their provenance and the held-out errors.
 
 Envelope: the per-input range of the training samples. :meth:`SurrogateWing.outside` names the inputs of a query
 that lie more than ``margin`` times that range beyond it, so that a caller can report or refuse states far from

@@ -1,146 +1,62 @@
-"""Reduced-order wing, first step: sample layout, admissible bridle points, the flight sampler and the MLP."""
+"""Reduced-order wing: the input layout, the MLP with its latent-state inputs and known linear part, the flights it is
+fitted to (FlightTape, fly_plan, save_tape/load_tape), the effective wing force of a tape, the latent filters and
+the fit (fit_mlp)."""
 
 from __future__ import annotations
+
+import dataclasses
+import json
 
 import numpy as np
 import pytest
 
-from kite_env.config import load_config
+from kite_env.config import Config, ModelMismatch, fingerprint, load_config
+from kite_env.frames import kite_frame
 from kite_env.fsi import FlightState
+from kite_env.surrogate.fit import (FILTERED, TAUS, FitData, build_dataset, filter_gain, fit_mlp, history_names,
+                                    latent_features, tape_samples)
 from kite_env.surrogate.model import SurrogateWing, output_errors
-from kite_env.surrogate.samples import (INPUT_NAMES, OUTPUT_NAMES, StateSampler, WingSamples, admissible, features,
-                                        flight_state, targets)
-from conftest import LEGACY_CONFIG  # noqa: E402
-
-#: the model the shipped reduced-order wing and its start table were built on (configs/legacy_v0.yaml)
-LEGACY = load_config(LEGACY_CONFIG)
+from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES, features
+from kite_env.surrogate.trajectories import COLUMNS, EpisodePlan, FlightTape, fly_plan, load_tape, save_tape
 
 
-def _rot(axis, angle):
-    from kite_env.structure.rotations import expm
-
-    return expm(angle * np.asarray(axis, float) / np.linalg.norm(axis))
-
-
-def test_features_and_flight_state_round_trip():
+def test_features_layout():
+    """features: q_b - q_design, qdot_b, v_app = v_kite - v_wind, omega, in INPUT_NAMES' order."""
     q_design = np.arange(12.0).reshape(4, 3)
     q_b = q_design + 0.01 * np.arange(12).reshape(4, 3)
     qdot = np.linspace(-1, 1, 12).reshape(4, 3)
     X = FlightState(v_kite=np.array([-20.0, 1.0, -3.0]), omega=np.array([0.1, -0.2, 0.3]),
                     v_wind=np.array([4.0, 0.5, 1.0]))
     x = features(q_b, qdot, X, q_design)
-    assert x.shape == (len(INPUT_NAMES),) == (30,)
-    np.testing.assert_allclose(x[12:24], qdot.ravel())
-    q2, X2 = flight_state(x, q_design)
-    np.testing.assert_allclose(q2, q_b)
-    np.testing.assert_allclose(X2.v_kite - X2.v_wind, X.v_kite - X.v_wind)
-    np.testing.assert_allclose(X2.omega, X.omega)
-
-
-def test_admissible_restores_tip_lengths_and_frame_k():
-    rng = np.random.default_rng(1)
-    q = np.array([[0.0, 2.9, 0.0], [0.62, 2.75, 0.0], [0.0, -2.9, 0.0], [0.62, -2.75, 0.0]])
-    lengths = (np.linalg.norm(q[0] - q[1]), np.linalg.norm(q[2] - q[3]))
-    for _ in range(5):
-        qp = admissible(q + rng.normal(0, 0.05, (4, 3)), lengths)
-        assert np.linalg.norm(qp[0] - qp[1]) == pytest.approx(lengths[0], rel=1e-12)
-        assert np.linalg.norm(qp[2] - qp[3]) == pytest.approx(lengths[1], rel=1e-12)
-        # frame K: origin mid A-C, A and C on the y axis, the mid-point of B and D in the x-y plane, x towards it
-        np.testing.assert_allclose(qp[0] + qp[2], 0.0, atol=1e-12)
-        np.testing.assert_allclose(qp[0][[0, 2]], 0.0, atol=1e-12)
-        mid = 0.5 * (qp[1] + qp[3])
-        assert abs(mid[2]) < 1e-12 and mid[0] > 0
-        np.testing.assert_allclose(admissible(qp, lengths), qp, atol=1e-12)  # idempotent
-    # a rigid motion of admissible points changes nothing in K
-    qp = admissible(q, lengths)
-    moved = qp @ _rot([0.3, -1.0, 0.5], 0.7).T + np.array([3.0, -2.0, 1.0])
-    np.testing.assert_allclose(admissible(moved, lengths), qp, atol=1e-12)
-
-
-@pytest.fixture(scope="module")
-def short_flight_samples():
-    from agents.policies import make_agent
-    from kite_env.envs.figure_eight import KiteFigureEightEnv
-
-    env = KiteFigureEightEnv(config=LEGACY, overrides=["env.max_episode_s=0.06"])
-    recs = []
-
-    class Both(StateSampler):  # keep the records to compare with
-        def record(self, rec, *a):
-            recs.append(rec)
-            super().record(rec, *a)
-
-    sampler = Both(every=3, n_perturb=1, rng=np.random.default_rng(0), group=7)
-    env.recorder = sampler
-    obs, _ = env.reset(seed=0)
-    agent = make_agent("constant:0.3", env)
-    done = False
-    while not done:
-        obs, _, term, trunc, _ = env.step(agent.predict(obs)[0])
-        done = term or trunc
-    return env, sampler, recs
-
-
-def test_sampler_stores_the_flight_solutions_and_admissible_perturbations(short_flight_samples):
-    env, sampler, recs = short_flight_samples
-    S = sampler.samples()
-    n_visit = 1 + len(recs) // 3  # the reset state and every third of the 12 physics steps
-    assert int(np.sum(S.origin == 0)) == n_visit and len(recs) == 12
-    assert int(np.sum(S.origin == 1)) == n_visit - sampler.failed
-    assert np.all(S.group == 7) and np.all(np.isfinite(S.inputs)) and np.all(np.isfinite(S.outputs))
-    visited = S.outputs[S.origin == 0]
-    np.testing.assert_array_equal(visited[1], targets(recs[2].wing))  # the third physics step's own wing solution
-    q_design = env.sim.wing.design_bridle
-    for x in S.inputs[S.origin == 1]:
-        q, _ = flight_state(x, q_design)
-        np.testing.assert_allclose(admissible(q, env.sim.tip_lengths), q, atol=1e-9)
-        assert np.all(x[12:24] == 0.0)  # static solves: no deformation rate
-    # outputs: bridle forces pull the wing towards the KCU (-z_k), lift > drag > 0
-    F = S.outputs[:, :12].reshape(-1, 4, 3).sum(axis=1)
-    assert np.all(F[:, 2] < 0) and np.all(S.outputs[:, 15] > S.outputs[:, 16]) and np.all(S.outputs[:, 16] > 0)
+    assert x.shape == (len(INPUT_NAMES),) == (30,) and len(OUTPUT_NAMES) == 17
+    np.testing.assert_allclose(x[:12], (q_b - q_design).ravel(), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(x[12:24], qdot.ravel())
+    np.testing.assert_array_equal(x[24:27], X.v_kite - X.v_wind)
+    np.testing.assert_array_equal(x[27:30], X.omega)
+    assert INPUT_NAMES[:3] == ("dq_Ax", "dq_Ay", "dq_Az") and INPUT_NAMES[24] == "v_app_x"
+    assert INPUT_NAMES[27:] == ("omega_x", "omega_y", "omega_z") and OUTPUT_NAMES[15:] == ("lift", "drag")
 
 
 def test_wing_depends_on_the_apparent_velocity_only():
-    """Sampling stores v_kite - v_wind: the wing's loads must not depend on v_kite and v_wind separately."""
+    """The inputs carry v_kite - v_wind only: the FE wing's loads (default model) must not depend on v_kite and
+    v_wind separately."""
     from kite_env.polar import nominal_wing
 
-    wing = nominal_wing("rhino16", LEGACY)
+    wing = nominal_wing("rhino16", Config())
     X1 = FlightState(v_kite=np.array([-22.0, 0.0, -4.0]), omega=np.zeros(3), v_wind=np.array([3.0, 0.0, 1.5]))
     s1 = wing.solve(None, X1, support="lines", warm=False)
     X2 = FlightState(v_kite=X1.v_kite - X1.v_wind, omega=X1.omega, v_wind=np.zeros(3))
     s2 = wing.solve(None, X2, support="lines", warm=False)
+    assert np.abs(s1.F_b).max() > 100.0
     np.testing.assert_allclose(s2.F_b, s1.F_b, rtol=1e-9, atol=1e-6)
 
 
-def test_samples_save_load_and_layout_check(tmp_path):
-    S = WingSamples(np.ones((3, 30)), np.zeros((3, 17)), np.array([0, 1, 0]), np.array([2, 2, 3]), {"a": 1})
-    S2 = WingSamples.load(S.save(tmp_path / "s.npz"))
-    np.testing.assert_array_equal(S2.inputs, S.inputs)
-    assert S2.meta == {"a": 1} and list(S2.group) == [2, 2, 3]
-    np.savez(tmp_path / "bad.npz", inputs=np.ones((1, 2)), outputs=np.ones((1, 2)), origin=[0], group=[0], meta="{}",
-             input_names=np.array(["x", "y"]), output_names=np.array(["u", "v"]))
-    with pytest.raises(ValueError, match="layout"):
-        WingSamples.load(tmp_path / "bad.npz")
-
-
-def test_samples_of_separate_runs_merge_with_distinct_episodes():
-    """Merged sampling runs (build_surrogate --sample-seeds) keep every run's episodes apart: run 2's episode 0 is
-    not run 1's episode 0 (the hold-out split is by episode)."""
-    a = WingSamples(np.zeros((3, 30)), np.zeros((3, 17)), np.array([0, 1, 0]), np.array([0, 0, 1]), {"seed": 0})
-    b = WingSamples(np.ones((2, 30)), np.ones((2, 17)), np.array([0, 0]), np.array([0, 2]), {"seed": 1})
-    m = WingSamples.merge([a, b])
-    assert list(m.group) == [0, 0, 1, 2, 4] and list(m.origin) == [0, 1, 0, 0, 0]
-    np.testing.assert_array_equal(m.inputs[3:], b.inputs)
-    assert m.meta["seed"] == 0 and [r["seed"] for r in m.meta["runs"]] == [0, 1]
-    assert m.meta["n_samples"] == 5 and m.meta["episodes"] == 5
-    with pytest.raises(ValueError, match="nothing to merge"):
-        WingSamples.merge([])
-
-
-def _linear_model(A, c, x_mean, x_std):
-    """A one-layer SurrogateWing y = A x_n + c with unit output normalisation (an analytic check of predict)."""
-    return SurrogateWing([A.T.copy()], [c.copy()], x_mean, x_std, np.zeros(17), np.ones(17),
-                         x_mean - 1.0, x_mean + 1.0)
+def _linear_model(A, c, x_mean, x_std, meta=None, K_b=None):
+    """A one-layer SurrogateWing y = A x_n + c (+ K_b x[:12]) with unit output normalisation (an analytic check of
+    predict)."""
+    kw = {} if K_b is None else {"K_b": K_b}
+    return SurrogateWing([A.T.copy()], [c.copy()], x_mean, x_std, np.zeros(17), np.ones(17), x_mean - 1.0,
+                         x_mean + 1.0, meta or {}, **kw)
 
 
 def test_surrogate_predict_save_load_and_envelope(tmp_path):
@@ -148,6 +64,8 @@ def test_surrogate_predict_save_load_and_envelope(tmp_path):
     A, c = rng.normal(size=(17, 30)), rng.normal(size=17)
     x_mean, x_std = rng.normal(size=30), rng.uniform(0.5, 2.0, 30)
     m = _linear_model(A, c, x_mean, x_std)
+    assert m.input_names == INPUT_NAMES and m.taus == () and m.filtered == () and not m.inertial
+    assert np.array_equal(m.K_b, np.zeros((12, 12)))
     x = rng.normal(size=(5, 30))
     np.testing.assert_allclose(m.predict(x), ((x - x_mean) / x_std) @ A.T + c, rtol=1e-12)
     assert m.predict(x[0]).shape == (17,)
@@ -175,6 +93,57 @@ def test_surrogate_predict_save_load_and_envelope(tmp_path):
                       np.zeros(3), np.ones(3))
 
 
+HISTORY = {"taus_s": list(TAUS), "filtered": list(FILTERED), "inertial": True}
+
+
+def test_surrogate_with_history_inputs_and_known_linear_part(tmp_path):
+    """A wing with memory: its inputs are INPUT_NAMES, then per time constant the filtered inputs less the current
+    ones (named <input>_lag<ms>ms); predict adds K_b (q_b - q_design) to the bridle forces only; save/load keeps
+    K_b, the meta and the layout; a file whose stored input names are not those its meta describes is refused, and
+    a file without K_b (a memoryless wing of before) loads with K_b = 0."""
+    rng = np.random.default_rng(1)
+    n_in = 30 + len(TAUS) * len(FILTERED)
+    A, c = rng.normal(size=(17, n_in)), rng.normal(size=17)
+    x_mean, x_std = rng.normal(size=n_in), rng.uniform(0.5, 2.0, n_in)
+    K_b = rng.normal(0.0, 1e3, (12, 12))
+    m = _linear_model(A, c, x_mean, x_std, {"history": HISTORY, "note": "test"}, K_b)
+    assert m.taus == TAUS and m.filtered == FILTERED and m.inertial
+    assert len(m.input_names) == n_in and m.input_names[:30] == INPUT_NAMES
+    assert m.input_names[30:] == history_names(TAUS)
+    assert m.input_names[30] == "dq_Ax_lag50ms" and m.input_names[-1] == "omega_z_lag250ms"
+    x = rng.normal(size=(6, n_in))
+    y = m.predict(x)
+    ref = ((x - x_mean) / x_std) @ A.T + c
+    ref[:, :12] += x[:, :12] @ K_b.T
+    np.testing.assert_allclose(y, ref, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(m.predict(x[2]), y[2], rtol=1e-14)
+    # K_b acts on q_b - q_design (the first 12 inputs) and on the forces alone
+    x2 = x.copy()
+    x2[:, 12:] += 1.0
+    d = m.predict(x2) - dataclasses.replace(m, K_b=np.zeros((12, 12))).predict(x2)
+    np.testing.assert_allclose(d[:, :12], x[:, :12] @ K_b.T, rtol=1e-10, atol=1e-8)
+    assert np.all(d[:, 12:] == 0.0)
+    m2 = SurrogateWing.load(m.save(tmp_path / "w.npz"))
+    np.testing.assert_array_equal(m2.K_b, K_b)
+    assert m2.meta == m.meta and m2.input_names == m.input_names and m2.taus == TAUS and m2.inertial
+    np.testing.assert_allclose(m2.predict(x), y, rtol=1e-5, atol=1e-4)
+    # a file whose meta says other time constants than its stored input names
+    with np.load(tmp_path / "w.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    bad = dict(arrays, meta=json.dumps({"history": {**HISTORY, "taus_s": [0.1, 0.25]}}))
+    np.savez(tmp_path / "bad.npz", **bad)
+    with pytest.raises(ValueError, match="another input/output layout"):
+        SurrogateWing.load(tmp_path / "bad.npz")
+    # a memoryless wing saved before K_b existed
+    m0 = _linear_model(A[:, :30], c, x_mean[:30], x_std[:30])
+    m0.save(tmp_path / "old.npz")
+    with np.load(tmp_path / "old.npz") as z:
+        arrays = {k: z[k] for k in z.files if k != "K_b"}
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = SurrogateWing.load(tmp_path / "old.npz")
+    assert np.array_equal(old.K_b, np.zeros((12, 12))) and old.input_names == INPUT_NAMES
+
+
 def test_output_errors_relative_to_traction():
     y = np.zeros((4, 17))
     y[:, 2] = y[:, 8] = -1000.0  # A and C pull 1 kN each along -z: traction 2 kN
@@ -186,26 +155,204 @@ def test_output_errors_relative_to_traction():
     assert e["rms"][OUTPUT_NAMES[0]] == pytest.approx(20.0) and e["rms"]["lift"] == 0.0
 
 
-def test_training_script_fits_a_smooth_function(tmp_path):
-    """train_surrogate.py on synthetic samples of a smooth map: the held-out error is small and stored."""
-    import subprocess
-    import sys
-    from pathlib import Path
+def test_latent_features_are_the_exact_discrete_filters():
+    """latent_features: per time constant the filter z <- z + c (x - z), c = 1 - exp(-dt/tau) (filter_gain), started
+    at the first row's inputs and updated with each row before its z - x is taken, over the FILTERED inputs."""
+    rng = np.random.default_rng(2)
+    X = np.cumsum(rng.normal(size=(40, 30)), axis=0)
+    dt, taus = 0.005, (0.01, 0.05, 0.25)
+    assert filter_gain(dt, 0.05) == pytest.approx(1.0 - np.exp(-0.1), rel=1e-15)
+    H = latent_features(X, dt, taus)
+    n = len(FILTERED)
+    assert H.shape == (40, len(taus) * n) and FILTERED == tuple(range(12)) + tuple(range(24, 30))
+    for j, tau in enumerate(taus):
+        c = filter_gain(dt, tau)
+        z = [X[0, i] for i in FILTERED]
+        for k in range(len(X)):
+            for m, i in enumerate(FILTERED):
+                z[m] = z[m] + c * (X[k, i] - z[m])
+                assert H[k, j * n + m] == pytest.approx(z[m] - X[k, i], rel=1e-12, abs=1e-12)
+    assert np.all(H[0] == 0.0) and np.abs(H[1:]).min() > 0.0
+    # a constant input is a steady state: no history
+    assert np.all(latent_features(np.tile(X[:1], (10, 1)), dt, taus) == 0.0)
 
-    rng = np.random.default_rng(3)
-    n = 1200
-    X = rng.normal(size=(n, 30))
-    Y = np.tanh(X[:, :17] * 0.5) * 100.0 + 0.3 * X[:, 13:30] ** 2
-    Y[:, 2] -= 2000.0
-    WingSamples(X, Y, np.zeros(n, int), np.arange(n) % 10, {"git_commit": "test"}).save(tmp_path / "s.npz")
-    script = Path(__file__).parents[2] / "scripts" / "train_surrogate.py"
-    r = subprocess.run([sys.executable, str(script), "--samples", str(tmp_path / "s.npz"), "--out",
-                        str(tmp_path / "w.npz"), "--epochs", "300", "--hidden", "64"], capture_output=True, text=True,
-                       timeout=300)
-    assert r.returncode == 0, r.stderr
-    m = SurrogateWing.load(tmp_path / "w.npz")
-    assert m.meta["samples"]["git_commit"] == "test" and m.meta["n_heldout"] == 240
-    val = (np.arange(n) % 10) % 5 == 4
-    rel = np.sqrt(np.mean((m.predict(X[val]) - Y[val]) ** 2)) / np.std(Y[val])
-    assert rel < 0.1
-    assert m.meta["heldout_errors"]["force_rms_rel_traction"] < 0.05
+
+# ---------------------------------------------------------------------------------------------------- tapes
+#: a planned episode of 0.1 s (20 physics steps, 5 control steps) of the full default model
+PLAN = EpisodePlan(index=3, policy="baseline+held:0.3", wind_mps=6.0, turbulence_max=0.05, gust_mps=0.0,
+                   gust_start_s=0.0, duration_s=0.1, seed=7)
+
+
+class _WitnessTape(FlightTape):
+    """A FlightTape that also keeps what the wing's state held at each row (its nodes' accelerations A-D, in W)."""
+
+    def __init__(self):
+        super().__init__()
+        self.wing_a = []
+
+    def _row(self, rec, L_B, L_D):
+        super()._row(rec, L_B, L_D)
+        dyn = self.sim.dyn
+        self.wing_a.append(dyn.a[dyn.bridle] @ rec.R_wk.T)
+
+
+@pytest.fixture(scope="module")
+def tape():
+    witness = _WitnessTape()
+    arrays, meta = fly_plan(PLAN, tape=witness)
+    return arrays, meta, witness
+
+
+def test_a_planned_episode_is_recorded_step_by_step(tape):
+    """fly_plan flies the full default model (the wing with inertia) for the planned 0.1 s: one row per physics step
+    and the start, every column of COLUMNS with its shape; the accelerations of A-D are the wing's own (its nodes'
+    generalized-alpha accelerations, finite in every row; not the velocity differences), the KCU's its velocity
+    change over the step; the meta records the plan, the drawn conditions and the model."""
+    arrays, meta, witness = tape
+    cfg = Config()
+    n = round(PLAN.duration_s / cfg.dynamics.dt_s) + 1
+    assert type(witness.sim).__name__ == "DynamicFlightSimulator"
+    assert set(arrays) == set(COLUMNS)
+    for k, shape in COLUMNS.items():
+        assert arrays[k].shape == (n, *shape), k
+    t, v, a = arrays["t"], arrays["v"], arrays["a"]
+    np.testing.assert_allclose(np.diff(t), cfg.dynamics.dt_s, rtol=1e-9)
+    assert np.all(np.isfinite(a[:, :4])) and np.abs(a[:, :4]).max() > 1.0
+    np.testing.assert_array_equal(a[:, :4], np.array(witness.wing_a))
+    dv = (v[1:] - v[:-1]) / np.diff(t)[:, None, None]
+    np.testing.assert_array_equal(a[1:, 4], dv[:, 4])
+    assert np.all(np.isnan(a[0, 4]))  # no step before the start
+    assert not np.allclose(a[1:, :4], dv[:, :4], rtol=0.0, atol=1.0)
+    for k in ("r", "v", "rest", "tether_length", "tether_force", "tension", "wind", "alpha", "lift", "drag"):
+        assert np.all(np.isfinite(arrays[k][1:])), k
+    assert np.all(arrays["rest"][:, [0, 2]] == cfg.dynamics.power_line_length_m)
+    assert arrays["action"][0] == 0.0 and len(set(arrays["action"][1:])) > 1  # the held noise changes the action
+    np.testing.assert_allclose(np.linalg.norm(arrays["r"][:, 4], axis=1), arrays["tether_length"], rtol=1e-6)
+    np.testing.assert_allclose(arrays["wind"][:, 5], 0.5 * (arrays["wind"][:, 0] + arrays["wind"][:, 2]), atol=0.5)
+    assert meta["rows"] == n and meta["flown_s"] == pytest.approx(PLAN.duration_s) and meta["end"] == "time limit"
+    assert meta["plan"] == dataclasses.asdict(PLAN) and meta["overrides"] == PLAN.overrides()
+    assert meta["episode"]["wind_speed_mps"] == PLAN.wind_mps
+    assert 0.0 <= meta["episode"]["turbulence_intensity"] <= PLAN.turbulence_max
+    assert 4.0 * PLAN.wind_mps <= meta["episode"]["initial_speed_mps"] <= 4.8 * PLAN.wind_mps
+    assert meta["model"] == fingerprint(cfg) and meta["model"]["preset"] == "default"
+
+
+def test_tapes_save_and_load(tape, tmp_path):
+    arrays, meta, _ = tape
+    path = save_tape(tmp_path / "ep_0003.npz", arrays, meta)
+    assert path.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["ep_0003.npz"]  # no partial file left
+    back, meta2 = load_tape(path)
+    assert meta2 == json.loads(json.dumps(meta)) and set(back) == set(arrays)
+    for k in arrays:
+        np.testing.assert_array_equal(back[k], arrays[k], err_msg=k)  # (NaN where NaN)
+
+
+def _geometry(cfg):
+    from kite_env.polar import nominal_wing
+
+    wing = nominal_wing(cfg.kite.name, cfg)
+    q0 = wing.design_bridle
+    return wing, q0, (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
+
+
+@pytest.mark.parametrize("accel", ["central", "wing"])
+def test_the_effective_wing_force_recovers_the_accelerations(tape, accel):
+    """tape_samples: the effective wing force F_wing = m a - f_other on Table 1's point masses A-D, stored as the
+    reaction F_b = -F_wing in K, gives back the accelerations: m a = F_wing + f_other, with f_other the particle
+    system's forces without the wing (ParticleSystem.forces: bridle lines at the tape's rest lengths, their drag,
+    gravity) at the tape's positions, velocities and wind. ``central``: the central difference of the recorded
+    velocities (undefined at both ends); ``wing``: the wing's own accelerations. The inputs are the features of
+    the recorded state in its frame K."""
+    from kite_env.dynamics.particles import ParticleSystem
+
+    arrays, _, _ = tape
+    cfg = Config()
+    _, q0, tips = _geometry(cfg)
+    X, Y, ok = tape_samples(arrays, cfg, q0, tips, accel)
+    t, r, v, wind = arrays["t"], arrays["r"], arrays["v"], arrays["wind"]
+    n = len(t)
+    assert X.shape == (n, 30) and Y.shape == (n, 17)
+    if accel == "central":
+        assert not ok[0] and not ok[-1] and ok[1:-1].all()
+        a = np.full_like(v, np.nan)
+        a[1:-1] = (v[2:] - v[:-2]) / (t[2:] - t[:-2])[:, None, None]
+    else:
+        assert ok.all()
+        a = arrays["a"]
+    ps = ParticleSystem(cfg.dynamics, tips, np.zeros(4), cfg.aero.rho_kg_m3)
+    for k in np.flatnonzero(ok):
+        origin, R = kite_frame(*r[k, :4])
+        F_wing = -Y[k, :12].reshape(4, 3) @ R.T  # in W
+        ps.set_steering(float(arrays["rest"][k, 1]), float(arrays["rest"][k, 3]))
+        f, _ = ps.forces(r[k], v[k], wind[k, :5], F_wing)
+        ma = ps.m[:4, None] * a[k, :4]
+        np.testing.assert_allclose(f[:4], ma, rtol=0.0, atol=1e-9 * np.abs(ma).max() + 1e-6)
+        # the inputs: bridle points relative to the design, the apparent velocity of the origin, in K
+        np.testing.assert_allclose(X[k, :12], ((r[k, :4] - origin) @ R - q0).ravel(), atol=1e-10)
+        v_app = 0.5 * (v[k, 0] + v[k, 2]) - wind[k, 5]
+        np.testing.assert_allclose(X[k, 24:27], v_app @ R, atol=1e-10)
+    # the pull of the wing on the lines is towards the KCU (-z_k): the reactions point the other way, summed
+    assert np.all(Y[ok, :12].reshape(-1, 4, 3).sum(axis=1)[:, 2] < 0.0)
+    np.testing.assert_array_equal(Y[:, 15], arrays["lift"])
+    np.testing.assert_array_equal(Y[:, 12:15], np.clip(arrays["alpha"], -0.5, 0.5))
+
+
+def test_build_dataset_adds_the_history_and_refuses_a_tape_of_another_model(tape, tmp_path):
+    arrays, meta, _ = tape
+    save_tape(tmp_path / "ep_0003.npz", arrays, meta)
+    cfg = Config()
+    wing, q0, tips = _geometry(cfg)
+    data = build_dataset(tmp_path, cfg, wing, log=lambda m: None)
+    X, Y, ok = tape_samples(arrays, cfg, q0, tips)
+    H = latent_features(X, cfg.dynamics.dt_s, TAUS)
+    np.testing.assert_array_equal(data.inputs, np.hstack([X, H])[ok])
+    np.testing.assert_array_equal(data.outputs, Y[ok])
+    assert np.all(data.group == PLAN.index) and data.meta["taus_s"] == list(TAUS)
+    static = load_config(None, ["structure.dynamic=false"])  # the quasi-static wing
+    with pytest.raises(ModelMismatch, match=r"tape '.*ep_0003.npz'.*structure\.dynamic"):
+        build_dataset(tmp_path, static, wing, log=lambda m: None)
+
+
+# ---------------------------------------------------------------------------------------------------- fit
+def test_fit_mlp_fits_a_smooth_map_on_top_of_the_known_linear_part():
+    """fit_mlp on synthetic data of the history layout (48 inputs): a smooth map of three of them plus a stiff linear
+    part K_b x[:12] on the forces. Episodes are held out whole; the MLP fits the outputs less K_b x[:12]; the report's
+    held-out errors are those of the whole model (MLP and linear part), and they are small."""
+    rng = np.random.default_rng(4)
+    n_ep, per = 40, 60
+    n = n_ep * per
+    X = rng.normal(size=(n, 48))
+    D = rng.normal(size=(3, 17))
+    D /= np.linalg.norm(D, axis=0)
+    scale = np.array([300.0] * 12 + [0.1] * 3 + [500.0, 100.0])
+    offset = np.zeros(17)
+    offset[[2, 15, 16]] = -3000.0, 2000.0, 300.0
+    smooth = scale * np.tanh(0.7 * X[:, 24:27] @ D) + offset
+    K_b = rng.normal(0.0, 2e3, (12, 12))
+    lin = np.zeros((n, 17))
+    lin[:, :12] = X[:, :12] @ K_b.T
+    Y = smooth + lin
+    group = np.repeat(np.arange(n_ep), per)
+    data = FitData(X, Y, group, {})
+    W, b, (x_mean, x_std, y_mean, y_std, lo, hi), report = fit_mlp(data, hidden=(32, 32), epochs=40, batch=64,
+                                                                  lr=3e-3, K_b=K_b, log=lambda m: None)
+    val = group % 5 == 4
+    assert report["n_val"] == int(val.sum()) == 8 * per and report["n_train"] == n - 8 * per
+    assert [w.shape for w in W] == [(48, 32), (32, 32), (32, 17)]
+    np.testing.assert_array_equal(lo, X[~val].min(0))
+    np.testing.assert_array_equal(hi, X[~val].max(0))
+    meta = {"history": {"taus_s": [0.05, 0.25], "filtered": list(range(9)), "inertial": True}}
+    wing = SurrogateWing(W, b, x_mean, x_std, y_mean, y_std, lo, hi, meta, K_b)
+    assert len(wing.input_names) == 48
+    err = output_errors(Y[val], wing.predict(X[val]))
+    # the report is the whole model's error on the held-out episodes (torch's float32 against NumPy's float64)
+    assert report["force_rms_N"] == pytest.approx(err["force_rms_N"], rel=1e-3)
+    assert report["rms"]["lift"] == pytest.approx(err["rms"]["lift"], rel=1e-3)
+    # small against the spread of the smooth part and far below the size of the linear part
+    spread = np.sqrt(np.mean(np.var(smooth[val, :12], axis=0)))
+    assert err["force_rms_N"] < 0.1 * spread
+    assert err["force_rms_N"] < 0.01 * np.sqrt(np.mean(np.var(lin[val, :12], axis=0)))
+    assert err["rms"]["lift"] < 0.1 * np.std(smooth[val, 15])
+    # the MLP alone is the map less the linear part
+    mlp = dataclasses.replace(wing, K_b=np.zeros((12, 12))).predict(X[val])
+    assert np.sqrt(np.mean((mlp[:, :12] - smooth[val, :12]) ** 2)) == pytest.approx(err["force_rms_N"], rel=1e-6)
