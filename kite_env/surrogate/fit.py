@@ -342,3 +342,35 @@ def corrective_samples(arrays: dict, meta: dict, surrogate, cfg, q_design, tips,
     if not Xs:
         return np.zeros((0, len(surrogate.input_names))), np.zeros((0, 17))
     return np.array(Xs), np.array(Ys)
+
+
+# ---------------------------------------------------------------------------------------------------- closed loop
+def tape_metrics(arrays: dict, cfg, warmup_s: float = 3.0) -> dict:
+    """What a flight did, from its tape: how long it flew, its mean tether force and its RMS distance to the
+    figure-eight [deg] after ``warmup_s`` (every control step: each fourth row)."""
+    from kite_env.trajectory import Lemniscate
+
+    t, r, F = arrays["t"], arrays["r"], arrays["tether_force"]
+    path = Lemniscate(cfg.trajectory)
+    keep = np.flatnonzero(t - t[0] >= warmup_s)[::4]
+    d, s = [], None
+    for k in keep:
+        n = path.nearest(r[k, 4], s)
+        s = n.s
+        d.append(n.distance_rad)
+    f = F[keep][np.isfinite(F[keep])]
+    return {"flown_s": float(t[-1] - t[0]), "traction_mean_N": float(f.mean()) if f.size else float("nan"),
+            "tracking_rms_deg": float(np.degrees(np.sqrt(np.mean(np.square(d))))) if d else float("nan")}
+
+
+def closed_loop(tape_path, surrogate_path) -> tuple[dict, dict, str, str]:
+    """The planned episode of a recorded flight flown again in the fast fidelity (same start, wind, turbulence and
+    policy, in closed loop): ``(full-model metrics, fast metrics, full-model end, fast end)``
+    (:func:`tape_metrics`)."""
+    from kite_env.surrogate.trajectories import EpisodePlan, fly_plan, load_tape
+
+    arrays, meta = load_tape(tape_path)
+    cfg = tape_config(meta)
+    plan = EpisodePlan(**meta["plan"])
+    fast, fmeta = fly_plan(plan, ["sim.fidelity=surrogate", f"sim.surrogate_path={surrogate_path}"])
+    return tape_metrics(arrays, cfg), tape_metrics(fast, cfg), meta["end"], fmeta["end"]
