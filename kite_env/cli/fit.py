@@ -29,10 +29,11 @@ from pathlib import Path
 
 
 def _sample_worker(args):
-    out, n, seed, overrides, start, step = args
+    out, n, seed, overrides, start, step, starts = args
     from kite_env.surrogate.trajectories import sample_flights
 
-    sample_flights(out, n, seed, overrides, start=start, step=step, log=lambda s: print(s, flush=True))
+    sample_flights(out, n, seed, overrides, start=start, step=step, log=lambda s: print(s, flush=True),
+                   starts=starts)
     return 0
 
 
@@ -155,6 +156,8 @@ def main(argv=None) -> int:
     s.add_argument("--episodes", type=int, default=120)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=1)
+    s.add_argument("--starts", action="store_true", help="short episodes of starts (kite_env.surrogate.trajectories."
+                   "start_plan) instead of the flights of the sampling plan")
     s.add_argument("--config", default=None, help="physics config (YAML); default: the flying model")
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     f = sub.add_parser("fit", help="fit the reduced-order wing to the tapes")
@@ -206,10 +209,10 @@ def main(argv=None) -> int:
         return 2
     try:
         if args.jobs == 1:
-            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1))
+            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1, args.starts))
         else:
             with mp.get_context("spawn").Pool(args.jobs) as pool:
-                pool.map(_sample_worker, [(args.out, args.episodes, args.seed, over, j, args.jobs)
+                pool.map(_sample_worker, [(args.out, args.episodes, args.seed, over, j, args.jobs, args.starts)
                                           for j in range(args.jobs)])
     except KeyboardInterrupt:
         print("kite-fit: interrupted; run the same command again to go on", file=sys.stderr)

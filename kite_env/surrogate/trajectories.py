@@ -187,6 +187,24 @@ def sampling_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
     return plan
 
 
+#: index of the first start episode (:func:`start_plan`): apart from the flights of :func:`sampling_plan`
+START_INDEX = 10_000
+
+
+def start_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
+    """``n`` short episodes (3 s) of starts, indexed from :data:`START_INDEX`: the first second after a reset is a
+    transient of its own (the wing released from its static shape at 4-5 times the wind) that the long flights sample
+    once each; the paper's controller and the controller with held offsets in turn, in the conditions of
+    :func:`sampling_plan`."""
+    rng = np.random.default_rng(seed)
+    plan = []
+    for i in range(n):
+        pol = "baseline" if i % 2 == 0 else f"baseline+held:{rng.uniform(0.1, 0.5):.3f}"
+        plan.append(EpisodePlan(START_INDEX + i, pol, round(float(rng.uniform(*winds)), 3), 0.1, 0.0, 0.0, 3.0,
+                                int(rng.integers(2**31 - 1))))
+    return plan
+
+
 def make_sampling_policy(spec: str, env, seed: int):
     """The policy of an :class:`EpisodePlan` for ``env``."""
     from agents.policies import make_agent
@@ -233,14 +251,14 @@ def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = Non
 
 
 def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), start: int = 0, step: int = 1,
-                   log=print) -> list[Path]:
-    """Fly the episodes ``start, start + step, ...`` of ``sampling_plan(n, seed)`` into ``out_dir/ep_XXXX.npz``,
-    skipping those already there (an interrupted run goes on where it stopped; several processes share a plan with
-    distinct ``start`` and the same ``step``)."""
+                   log=print, starts: bool = False) -> list[Path]:
+    """Fly the episodes ``start, start + step, ...`` of ``sampling_plan(n, seed)`` (``starts``: of
+    :func:`start_plan`) into ``out_dir/ep_XXXX.npz``, skipping those already there (an interrupted run goes on where it
+    stopped; several processes share a plan with distinct ``start`` and the same ``step``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for plan in sampling_plan(n, seed)[start::step]:
+    for plan in (start_plan if starts else sampling_plan)(n, seed)[start::step]:
         path = out / f"ep_{plan.index:04d}.npz"
         paths.append(path)
         if path.is_file():
@@ -253,7 +271,7 @@ def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), st
     return paths
 
 
-__all__ = ["COLUMNS", "EpisodePlan", "FlightTape", "HeldNoise", "fly_plan", "load_tape", "make_sampling_policy",
-           "sample_flights", "sampling_plan", "save_tape"]
+__all__ = ["COLUMNS", "START_INDEX", "EpisodePlan", "FlightTape", "HeldNoise", "fly_plan", "load_tape",
+           "make_sampling_policy", "sample_flights", "sampling_plan", "save_tape", "start_plan"]
 
 _ = math

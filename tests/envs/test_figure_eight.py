@@ -29,14 +29,20 @@ def _rollout(env, actions, seed):
     return np.concatenate(out)
 
 
-def test_registered_and_checkers_pass():
+@pytest.mark.parametrize("env_id", ["KiteFigureEight-v1", "KiteFigureEightFast-v1"])
+def test_registered_and_checkers_pass_with_warnings_as_errors(env_id):
+    """Gymnasium's and Stable-Baselines3's env checkers on both ids, every warning an error."""
+    import warnings
+
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = gym.make("KiteFigureEight-v1", render_mode="rgb_array")
+    env = gym.make(env_id, render_mode="rgb_array")
     assert isinstance(env.unwrapped, KiteFigureEightEnv)
-    check_env(env.unwrapped, skip_render_check=False)
-    sb3_check_env(env.unwrapped, warn=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped, skip_render_check=False)
+        sb3_check_env(env.unwrapped, warn=True)
     assert env.observation_space.shape == (22,) and np.all(np.isfinite(env.observation_space.low))
     assert env.action_space.shape == (1,)
 
