@@ -21,7 +21,6 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 #: offset of the validation seeds from the training seed (kite-eval's evaluation seeds are chosen by the user;
@@ -176,4 +175,3 @@ def optimize(args) -> Path:
 
 
 __all__ = ["SAMPLERS", "VALIDATION_SEED_OFFSET", "best_recipe", "optimize", "sample_ppo", "sample_sac"]
-_ = np

@@ -17,7 +17,6 @@ model's fingerprint, refused for another model) so that a refitted fast wing is 
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
@@ -188,4 +187,3 @@ def agreement_table(result: dict) -> str:
 
 __all__ = ["END_REASON_EPISODES", "FLIGHTS", "Flight", "RANDOM_CONDITIONS", "TRACKING_DEG", "TRACTION_REL",
            "agreement_table", "fly_case", "random_episode", "run_agreement"]
-_ = math

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES
+from kite_env.surrogate.samples import INPUT_NAMES
 
 #: the sections' angles of attack are fitted within +-ALPHA_BOUND [rad]: beyond it a section is stalled or, on a kite
 #: that falls back on a slack tether, blown from behind (alpha jumps by 2 pi at the rear); the reduced-order wing
@@ -76,7 +76,6 @@ def tape_samples(arrays: dict, cfg, q_design: np.ndarray, tip_lengths, accel: st
     from kite_env.dynamics.particles import ParticleSystem
 
     n = len(arrays["t"])
-    dt = cfg.dynamics.dt_s
     ps = ParticleSystem(cfg.dynamics, tip_lengths, np.zeros(4), cfg.aero.rho_kg_m3)
     X = np.zeros((n, 30))
     Y = np.full((n, 17), np.nan)
@@ -212,7 +211,6 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
 
 __all__ = ["FILTERED", "FitData", "TAUS", "build_dataset", "filter_gain", "fit_mlp", "history_names",
            "latent_features", "tape_samples"]
-_ = OUTPUT_NAMES
 
 
 def reference_stiffness(cfg, wing=None) -> np.ndarray:

@@ -16,7 +16,6 @@ of attack of the right tip, mid and left tip sections, lift and drag; the wing s
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -274,4 +273,3 @@ def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), st
 __all__ = ["COLUMNS", "START_INDEX", "EpisodePlan", "FlightTape", "HeldNoise", "fly_plan", "load_tape",
            "make_sampling_policy", "sample_flights", "sampling_plan", "save_tape", "start_plan"]
 
-_ = math

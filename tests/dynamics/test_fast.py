@@ -348,3 +348,18 @@ def test_a_wing_fitted_to_another_model_is_refused(setup, tmp_path):
     for make in (lambda: surrogate_for(cfg_b), lambda: make_simulator(cfg_b, WindField(cfg_b.wind))):
         with pytest.raises(ModelMismatch, match="records no model"):
             make()
+
+
+@pytest.mark.slow  # 15 s of the full model: ~20-40 s
+def test_the_fast_fidelity_agrees_with_the_full_model_over_a_turbulent_flight():
+    """The paper's controller 15 s at 8 m/s with turbulence 0.1 (the same realisation) in both fidelities: the mean
+    traction within 3 % and the tracking error within 1 deg (kite_env.surrogate.agreement's targets; the README's
+    agreement table has the long flights, where 4-5 m/s do not hold)."""
+    from kite_env.surrogate.agreement import TRACKING_DEG, TRACTION_REL, fly_case
+
+    base = ["wind.speed_mps=8.0", "wind.turbulence_intensity=0.1", "wind.seed=0"]
+    full = fly_case((base, 15.0))
+    fast = fly_case((["sim.fidelity=surrogate", *base], 15.0))
+    assert full["end"] == fast["end"] == "completed"
+    assert abs(fast["traction_mean_N"] / full["traction_mean_N"] - 1.0) < TRACTION_REL
+    assert abs(fast["tracking_rms_deg"] - full["tracking_rms_deg"]) < TRACKING_DEG
