@@ -1,7 +1,7 @@
 """``kite-fit``: make the fast fidelity's reduced-order wing for a model.
 
     kite-fit sample --out DIR [--episodes N] [--seed S] [--jobs J] [--config FILE] [--set SECTION.KEY=VALUE ...]
-    kite-fit fit --tapes DIR --out FILE.npz [--hidden 64,64] [--epochs 300] [--seed 0] [--config FILE] [--set ...]
+    kite-fit fit --tapes DIR --out FILE.npz [--hidden 128,128] [--epochs 150] [--seed 0] [--config FILE] [--set ...]
     kite-fit agreement --out DIR [--surrogate FILE.npz] [--episodes 50] [--jobs J] [--quick]
     kite-fit start-table --out FILE_start.npz [--s-grid 16:58:3] [--w-grid -11:-2:1] [--config FILE] [--set ...]
 
@@ -163,8 +163,8 @@ def main(argv=None) -> int:
     f = sub.add_parser("fit", help="fit the reduced-order wing to the tapes")
     f.add_argument("--tapes", required=True, type=Path)
     f.add_argument("--out", required=True, type=Path)
-    f.add_argument("--hidden", default="64,64")
-    f.add_argument("--epochs", type=int, default=300)
+    f.add_argument("--hidden", default="128,128")
+    f.add_argument("--epochs", type=int, default=150)
     f.add_argument("--batch", type=int, default=2048)
     f.add_argument("--lr", type=float, default=2e-3)
     f.add_argument("--holdout", type=int, default=5)

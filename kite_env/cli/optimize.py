@@ -130,6 +130,31 @@ def best_recipe(study, algo: str, env_id: str, recipe_path: Path) -> dict:
     return data
 
 
+def _open_study(optuna, url: str, name: str, seed: int, attempts: int = 20):
+    """The study ``name`` in the RDB storage ``url``, created by the first worker. Workers that start together race
+    to create its tables and the study (SQLite: "database is locked", a duplicate study): such a worker waits a
+    random moment and tries again; SQLite connections wait up to 60 s for a lock."""
+    import random
+    import time
+
+    from kite_env.cli.train import UsageError
+
+    kwargs = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
+    last = None
+    for _ in range(attempts):
+        try:
+            storage = optuna.storages.RDBStorage(url, engine_kwargs=kwargs)
+            return optuna.create_study(storage=storage, study_name=name, direction="maximize", load_if_exists=True,
+                                       sampler=optuna.samplers.TPESampler(seed=seed),
+                                       pruner=optuna.pruners.MedianPruner(n_startup_trials=3, n_warmup_steps=0))
+        except (ValueError, ModuleNotFoundError, ImportError) as exc:  # a malformed URL or a missing driver
+            raise UsageError(f"--storage {url!r}: {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - a concurrent creation (lock, duplicate): wait and retry
+            last = exc
+            time.sleep(random.uniform(0.2, 1.5))
+    raise UsageError(f"--storage {url!r}: the study could not be opened: {last}")
+
+
 def optimize(args) -> Path:
     """Run this worker's trials of the study and write the best recipe so far (module docstring)."""
     try:
@@ -149,12 +174,7 @@ def optimize(args) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     storage = args.storage or f"sqlite:///{(out / 'study.db').resolve()}"
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    try:
-        study = optuna.create_study(storage=storage, study_name=args.study_name, direction="maximize",
-                                    load_if_exists=True, sampler=optuna.samplers.TPESampler(seed=args.seed),
-                                    pruner=optuna.pruners.MedianPruner(n_startup_trials=3, n_warmup_steps=0))
-    except Exception as exc:  # an unreachable or malformed storage URL: one line
-        raise UsageError(f"--storage {storage!r}: {exc}") from None
+    study = _open_study(optuna, storage, args.study_name, args.seed)
     import torch
 
     torch.set_num_threads(1)
