@@ -258,6 +258,20 @@ def tape_config(meta: dict):
                                                              seed=ep["wind_seed"]))
 
 
+def place_kite(ks, arrays: dict, row: int) -> None:
+    """Kite 0 of ``ks`` (:class:`~kite_env.dynamics.fast.SurrogateKites`) at row ``row`` of a tape: the full model's
+    positions and velocities made consistent with the fast fidelity's tip constraints (the FE tips flex by
+    centimetres), its tether length, reel speed and steering, the latent state at rest."""
+    from kite_env.dynamics.kernels import project_constraints
+
+    r0, v0 = project_constraints(arrays["r"][row], arrays["v"][row], ks.m, float(arrays["tether_length"][row]),
+                                 ks.tip_lengths, 3, float(arrays["reel_speed"][row]))
+    rest = arrays["rest"][row]
+    ks.set_kite(0, r0, v0, float(arrays["t"][row]), np.zeros(4), float(rest[1]), float(rest[3]))
+    ks.tether_length[0], ks.reel_speed[0] = arrays["tether_length"][row], arrays["reel_speed"][row]
+    ks.evaluate()
+
+
 def replay(arrays: dict, meta: dict, surrogate, start: int = 0, n_steps: int | None = None):
     """The fast fidelity flown along a recorded flight: from row ``start`` of the tape (positions, velocities, tether
     length and reel speed of the full model), with the tape's steering-line rest lengths at every step and the same
@@ -274,13 +288,7 @@ def replay(arrays: dict, meta: dict, surrogate, start: int = 0, n_steps: int | N
     ks = SurrogateKites(cfg, surrogate, q0, tips, 1)
     ks.set_wind(0, wind)
     rest = arrays["rest"]
-    from kite_env.dynamics.kernels import project_constraints
-
-    r0, v0 = project_constraints(arrays["r"][start], arrays["v"][start], ks.m, float(arrays["tether_length"][start]),
-                                 ks.tip_lengths, 3, float(arrays["reel_speed"][start]))  # (the tips at their lengths)
-    ks.set_kite(0, r0, v0, float(arrays["t"][start]), np.zeros(4), float(rest[start, 1]), float(rest[start, 3]))
-    ks.tether_length[0], ks.reel_speed[0] = arrays["tether_length"][start], arrays["reel_speed"][start]
-    ks.evaluate()
+    place_kite(ks, arrays, start)
     n = len(arrays["t"]) - 1 - start if n_steps is None else min(n_steps, len(arrays["t"]) - 1 - start)
     r, v, status = np.empty((n + 1, 5, 3)), np.empty((n + 1, 5, 3)), np.zeros(n + 1, dtype=int)
     r[0], v[0] = ks.r[0], ks.v[0]
@@ -300,7 +308,6 @@ def corrective_samples(arrays: dict, meta: dict, surrogate, cfg, q_design, tips,
     velocities (``omega`` [rad/s]). A wing fitted to these restores the shape and the rates it loses in its own
     flight instead of drifting from one error to the next. Returns inputs (n, n_in) and outputs (n, 17)."""
     from kite_env.dynamics.fast import SurrogateKites
-    from kite_env.dynamics.kernels import project_constraints
     from kite_env.dynamics.particles import ParticleSystem
     from kite_env.wind import WindField
 
@@ -314,11 +321,7 @@ def corrective_samples(arrays: dict, meta: dict, surrogate, cfg, q_design, tips,
     ks = SurrogateKites(run_cfg, surrogate, q_design, tips, 1)
     ks.set_wind(0, wind)
     for s in range(1, len(t) - horizon - 1, every):
-        r0, v0 = project_constraints(r[s], v[s], ks.m, float(arrays["tether_length"][s]), ks.tip_lengths, 3,
-                                     float(arrays["reel_speed"][s]))
-        ks.set_kite(0, r0, v0, float(t[s]), np.zeros(4), float(rest[s, 1]), float(rest[s, 3]))
-        ks.tether_length[0], ks.reel_speed[0] = arrays["tether_length"][s], arrays["reel_speed"][s]
-        ks.evaluate()
+        place_kite(ks, arrays, s)
         for k in range(1, horizon + 1):
             j = s + k
             ks.step(np.array([rest[j, 1]]), np.array([rest[j, 3]]))
