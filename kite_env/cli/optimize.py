@@ -161,7 +161,7 @@ def optimize(args) -> Path:
         import optuna
     except ImportError:  # pragma: no cover (a declared dependency)
         raise SystemExit("kite-train: error: --optimize needs optuna (pip install optuna)") from None
-    from kite_env.cli.train import UsageError, _vec_env_kind, default_recipe, training_config
+    from kite_env.cli.train import _vec_env_kind, default_recipe, training_config
 
     cfg, env_id, hp = training_config(args)
     n_envs = int(args.n_envs or hp.get("n_envs", 1))

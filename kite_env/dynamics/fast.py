@@ -31,6 +31,7 @@ from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, projec
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.fsi import WingSolution
+from kite_env.surrogate.fit import filter_gain
 from kite_env.structure.kernels import njit
 from kite_env.wind import _turbulence_kernel
 
@@ -229,7 +230,7 @@ def tanh_inplace(h):
 
 @njit(**_JIT)
 def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
-    """``y = tanh(tanh(x W0 + b0) W1 + b1) W2 + b2`` for one row ``x`` (30,) float64 -> ``y`` (17,) float64, in
+    """``y = tanh(tanh(x W0 + b0) W1 + b1) W2 + b2`` for one row ``x`` (n_in,) float64 -> ``y`` (17,) float64, in
     float32 (the weights are stored and trained in float32; the normalisations are folded into the first and last
     layers; tanh from :func:`tanh_inplace`). ``h0``, ``h1``, ``h2``: float32 work arrays of the layer widths. The
     weights of the 64-wide model fill 28 kB in float32, which stays in the L1 cache; in float64 they do not."""
@@ -522,7 +523,7 @@ class SurrogateKites:
         self.X = np.zeros((n, self.n_in))
         # the latent state of a wing with memory (kite_env.surrogate.fit): filters of the inputs sel, per kite
         self._sel = np.array(surrogate.filtered, dtype=np.int64)
-        self._gain = np.array([1.0 - math.exp(-self.dt / tau) for tau in surrogate.taus])
+        self._gain = np.array([filter_gain(self.dt, tau) for tau in surrogate.taus])
         self.Z = np.zeros((n, len(self._gain), len(self._sel)))
         self._K_b = np.ascontiguousarray(surrogate.K_b, dtype=float)
         self.Y = np.zeros((n, 17))

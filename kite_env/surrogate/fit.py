@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-from kite_env.surrogate.samples import INPUT_NAMES
 
 #: the sections' angles of attack are fitted within +-ALPHA_BOUND [rad]: beyond it a section is stalled or, on a kite
 #: that falls back on a slack tether, blown from behind (alpha jumps by 2 pi at the rear); the reduced-order wing
@@ -44,7 +43,10 @@ FILTERED = tuple(list(range(12)) + list(range(24, 30)))
 
 
 def history_names(taus=TAUS) -> tuple[str, ...]:
-    return tuple(f"{INPUT_NAMES[i]}_lag{int(round(1000 * tau))}ms" for tau in taus for i in FILTERED)
+    """Names of the latent state's inputs with these time constants (:func:`kite_env.surrogate.model.history_names`)."""
+    from kite_env.surrogate.model import history_names as names
+
+    return names(taus, FILTERED)
 
 
 def filter_gain(dt: float, tau: float) -> float:

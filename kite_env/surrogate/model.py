@@ -77,8 +77,7 @@ class SurrogateWing:
     def input_names(self) -> tuple[str, ...]:
         """The MLP's inputs: :data:`INPUT_NAMES`, then for each time constant the filtered inputs minus the current
         ones."""
-        return INPUT_NAMES + tuple(f"{INPUT_NAMES[i]}_lag{int(round(1000 * tau))}ms" for tau in self.taus
-                                   for i in self.filtered)
+        return INPUT_NAMES + history_names(self.taus, self.filtered)
 
     @property
     def inertial(self) -> bool:
@@ -141,6 +140,11 @@ class SurrogateWing:
             if tuple(z["input_names"]) != sw.input_names or tuple(z["output_names"]) != OUTPUT_NAMES:
                 raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
             return sw
+
+
+def history_names(taus, filtered) -> tuple[str, ...]:
+    """Names of the latent state's inputs: each filtered input of :data:`INPUT_NAMES` per time constant [s]."""
+    return tuple(f"{INPUT_NAMES[i]}_lag{int(round(1000 * tau))}ms" for tau in taus for i in filtered)
 
 
 def output_errors(y_true: np.ndarray, y_pred: np.ndarray) -> dict:
