@@ -41,44 +41,47 @@ class StructureConfig:
     wrinkling: bool = True  # tension-field membrane (no compressive membrane stress)
     # in-plane shear modulus of the canopy fabric as a fraction of the isotropic E / (2 (1 + nu)): 1 = the paper's
     # isotropic law; below 1 a balanced woven fabric with its threads along the chord (x of frame K) and span
-    # (kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/flight_model.md, section 26) [-]
+    # (kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/steering.md, "Where a steering input
+    # goes") [-]
     canopy_shear_ratio: float = 1.0
     # the canopy membrane's strain: "green_lagrange" (exact for any rotation) or "von_karman", the paper's (Sect.
     # II.A: "von Karman kinematic description"), whose tensioned canopy has no geometric stiffness against in-plane
     # motion and which strains an element turned in its plane by theta by cos(theta) - 1
-    # (kite_env.structure.shell_membrane; docs/flight_model.md, section 29)
+    # (kite_env.structure.shell_membrane; docs/steering.md, "The von Karman membrane")
     membrane_kinematics: str = "green_lagrange"
-    # inflated tubes (LE, struts): Breukels' correlations (physics_facts.md 2); 0.3 bar = V3 flight pressure (4.3)
+    # inflated tubes (LE, struts): Breukels' correlations (Breukels 2011); 0.3 bar = the V3's flight pressure in
+    # awegroup/kite_fem and kitesim
     tube_pressure_Pa: float = 0.3e5  # gauge pressure [Pa]
-    # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public (physics_facts 4.5):
+    # Axial stiffness of a tube wall, EA = pi d (E t)_fabric. No measured Dacron data is public:
     # modelling choice of twice the canopy's membrane stiffness E h = 1e5 N/m (tube fabric is a heavier cloth).
     tube_wall_Et_N_per_m: float = 2.0e5  # [N/m]
     # curvature of a tube element that Breukels' secant law is evaluated at: "element_energy" = the element's
     # root-mean-square curvature (the law is then the gradient of a stored energy, with an exact tangent;
-    # kite_env.structure.tube.element_curvature); "max_end" = the larger end curvature (stops before 29: not the
+    # kite_env.structure.tube.element_curvature); "max_end" = the larger end curvature (the former default: not the
     # gradient of an energy, not conservative, its tangent 4 % off, and it over-softens an S-bent element: the
-    # folding struts of the high-wind random episodes; docs/flight_model.md, sections 15 and 17)
+    # folding struts of the high-wind random episodes; docs/model.md, "Energy", "The conservative tube law")
     tube_curvature: str = "element_energy"
     # fold contact of a kinked tube (kite_env.structure.tube.fold_contact, with element_energy only): from this fold
     # angle of an element (rms curvature times length) its legs press on each other and the fold closes at 180 deg
     # instead of passing it (Breukels' collapsed tube is a hinge of no stiffness; the co-rotational element cannot
-    # represent a fold of 180 deg: docs/flight_model.md, section 18); 0 = none (stops before 31) [deg]
+    # represent a fold of 180 deg: docs/model.md, "Section frame, fold contact, rotary inertia"); 0 = none [deg]
     tube_fold_onset_deg: float = 90.0
     # tip beams ("thin stiff beam", Sect. II.A): a solid glass-fibre rod (modelling choice), diameter from the mesh
     tip_rod_E_Pa: float = 30.0e9  # [Pa]
-    # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (physics_facts 4.4)
+    # trailing-edge wire: Dyneema line, effective modulus of the kite_fem/kitesim bridle models (awegroup/kite_fem,
+    # awegroup/ASKITE)
     te_wire_E_Pa: float = 5.5e8  # [Pa]
     te_hem_EI_Nm2: float = 0.4  # bending stiffness of the trailing-edge hem (wire + seam tape), both axes [N m^2]
     # the trailing-edge hem's element: "rod" = a frame-free rod with the beam's axial, bending and (bounded)
-    # torsional stiffness (kite_env.structure.hem); "beam" = the co-rotational beam of the tubes (stops before 43),
+    # torsional stiffness (kite_env.structure.hem); "beam" = the co-rotational beam of the tubes (the former default),
     # whose element frame and rotation logarithm are singular when a slack canopy turns its trailing-edge nodes by
-    # 90-180 deg against the hem: its energy jumps there, and the nodes' rotations spin up (docs/flight_model.md,
-    # section 37)
+    # 90-180 deg against the hem: its energy jumps there, and the nodes' rotations spin up
+    # (docs/model.md, "The trailing-edge hem")
     te_hem_element: str = "rod"
     # the wing with inertia (dynamics/wing_dynamics.py): nodal masses (Table 1's 10 kg, 70 % on the LE tube) and
-    # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines (the default since
-    # stop 33, when issue 20's verification held: docs/flight_model.md, sections 12-20); false = the paper's
-    # quasi-static wing on the particles A-D
+    # the canopy's added mass, generalized-alpha in time, A-D wing nodes held by the bridle lines (docs/model.md,
+    # "The wing with inertia"; its verification: docs/validation.md, "Time-step convergence", "Against the static
+    # wing"); false = the paper's quasi-static wing on the particles A-D
     dynamic: bool = True
     rho_inf: float = 0.8  # generalized-alpha spectral radius at infinite frequency (1 = no numerical damping) [-]
     # added mass normal to the canopy: this factor times rho pi c^2 / 4 per unit span with Lissaman & Brown's
@@ -87,54 +90,57 @@ class StructureConfig:
     # rotary inertia of the wing's nodes (dynamic wing): this factor times the second moment of each node's
     # tributary rectangle (chordwise a, spanwise b) about the node, J = m (a^2 + b^2) / 24, the mean of its two
     # in-plane axes (lumped rotary inertia as in the HRZ lumping of Hinton, Rock & Zienkiewicz 1976, which gives a
-    # uniform beam's node m l^2 / 39); 0 = massless, quasi-static rotations (the default before stop 31: a slack canopy's
-    # trailing-edge rotations then had nothing to hold them, docs/flight_model.md, section 18) [-]
+    # uniform beam's node m l^2 / 39); 0 = massless, quasi-static rotations (a slack canopy's
+    # trailing-edge rotations then have nothing to hold them, docs/model.md, "Section frame, fold contact, rotary
+    # inertia") [-]
     rotary_inertia_factor: float = 1.0
     # structural damping of the wing with inertia: stiffness-proportional (Rayleigh) C = beta K_T on the nodal
     # translations, beta = 2 zeta / omega_ref: 2 % of critical (the level of the paper's relative damping
     # coefficients of the wing, Table 1: 0.015-0.02) at 4 Hz, the wing's lowest elastic mode in flight (its
-    # yaw/twist mode on the lines, 3.6-3.9 Hz), and more at every higher one (6.4e-4 s, 2 % at 10 Hz, before
-    # stop 42: 0.8 % at that mode; docs/flight_model.md, section 36); 0 = none [s]
+    # yaw/twist mode on the lines, 3.6-3.9 Hz), and more at every higher one (6.4e-4 s, 2 % at 10 Hz,
+    # gives 0.8 % at that mode; docs/model.md, "Structural damping"); 0 = none [s]
     rayleigh_beta_s: float = 1.6e-3
     # the tangent K_T of that damping is refreshed when it is this old (time from the step end where it was
     # assembled to the current step's end) and held, turned with the step's frame, in between: the damping matrix
-    # of the wing's shape at most this long ago. 0 = every step (stops 31-36). Assembling the full tangent at each
-    # step's Newton start cost 0.4 ms of a 5.5 ms step (docs/flight_model.md, section 25) [s]
+    # of the wing's shape at most this long ago. 0 = every step. Assembling the full tangent at each
+    # step's Newton start cost 0.4 ms of a 5.5 ms step (docs/performance.md, "The damping tangent held over 20 ms") [s]
     rayleigh_tangent_period_s: float = 0.02
     # the canopy's membrane forces in a time step of the wing with inertia: "energy_consistent" = the discrete
     # gradient of the stored energy between the step's ends (Gonzalez 2000), whose work is the energy change at the
-    # wrinkling law's kinks; "averaged" = generalized-alpha's averaged end forces (stops before 27), which pump energy
+    # wrinkling law's kinks; "averaged" = generalized-alpha's averaged end forces (default), which pump energy
     # into the canopy's fast membrane modes (a free wing gained 75 % of its kinetic energy in 0.3 s)
     membrane_forces: str = "averaged"
     # the wing with inertia: the force residual that a step's Newton leaves (below fsi.tol_force_rel of the load) is
     # added to the next step's load, so that its impulse is delivered one step late instead of lost (the unbalanced
-    # force correction). Dropped ("none", before stop 36), every step's residual is a small force on the wing that
+    # force correction). Dropped ("none"), every step's residual is a small force on the wing that
     # the flight integrates: the KCU lay 9.7 cm from the tightly converged flight after 10 s at 5 ms, 15 cm at
     # 2.5 ms. "sections": the residual's resultant force and moments on each chordwise section, spread over its
     # nodes like a rigid section's inertial load (1.4 cm, and Newton 1.59 instead of 1.68 iterations per step);
     # "full": all of it (0.1 cm; 1.78 iterations: the part within a section is what a kept factorisation contracts
-    # worst) (docs/flight_model.md, section 24)
+    # worst) (docs/performance.md, "The carried residual")
     carry_residual: str = "sections"
-    # the added mass's force: "normal_velocity_rate" (the default since stop 44) = Theodorsen's non-circulatory load
+    # the added mass's force: "normal_velocity_rate" (default) = Theodorsen's non-circulatory load
     # (NACA Report 496): the mass blocks M_a a plus -m_a (n' . v_rel) n at the 3/4-chord point, so that a steady turn
-    # leaves only the pitch-damping couple; "nodal_acceleration" = M_a a alone (the default before stop 44), which in
+    # leaves only the pitch-damping couple; "nodal_acceleration" = M_a a alone, which in
     # a steady turn pulls each section with its added mass times the turn's centripetal acceleration, as if the air
-    # turned with the wing. The normal-rate part fed the wing's 3.9 Hz yaw/twist mode at the structural damping
-    # before stop 42 (docs/flight_model.md, sections 27-28 and 36); with the damping at the wing's lowest mode, the
-    # hem's frame-free rods and the force's Newton tangent (sections 37-38) it flies every flight M_a a flies
+    # turned with the wing. The normal-rate part feeds the wing's 3.9 Hz yaw/twist mode at a lower structural
+    # damping (docs/steering.md, "The yaw rig"; docs/model.md, "Structural damping"); with the damping at the wing's
+    # lowest mode, the hem's frame-free rods and the force's Newton tangent (docs/model.md, "Theodorsen's force") it
+    # flies every flight M_a a flies
     added_mass_force: str = "normal_velocity_rate"
 
 
 @dataclass(frozen=True)
 class AeroConfig:
-    rho_kg_m3: float = 1.225  # air density, sea level (physics_facts 4.2) [kg/m^3]
+    rho_kg_m3: float = 1.225  # air density, sea level, 15 deg C (ISA) [kg/m^3]
     # Eq. (9) M = 1/2 rho CM c^p w V^2: p = 2 dimensionally consistent (default); 1 = as printed in the paper
     moment_chord_power: float = 2.0  # [-]
     # luffing canopy: a membrane cannot carry a reversed pressure, so as a section's CL falls to 0 its load moves from
     # the canopy nodes to the LE (tube) and TE (wire) nodes (aero.loads.LUFFING_BAND_CL); false = the paper
     canopy_luffing: bool = True
     # point / chord (from the airfoil nose) that Breukels' regression CM is taken about: 0 = the nose (gives the paper's
-    # 7.5 deg mid-wing alpha, docs/flight_model.md); 0.25 = the quarter chord, the open VSM codes' assumption
+    # 7.5 deg mid-wing alpha, docs/model.md, "Trim: the point Breukels' C_M is taken about"); 0.25 = the quarter chord,
+    # the open VSM codes' assumption
     cm_regression_ref_over_c: float = 0.0  # [-]
     # damping of the wing's deformation velocity: "consistent" = each section's quasi-steady force response to its
     # own translation velocity, spread over its nodes (symmetric part positive semi-definite; fsi.SectionDamping);
@@ -179,7 +185,8 @@ class DynamicsConfig:
     beta_bd: float = 0.002  # relative damping B-D (Table 1) [-]
     beta_diag: float = 0.015  # relative damping A-D and B-C (Table 1) [-]
     line_diameter_m: float = 0.0012  # bridle-line diameter d_c (Table 1) [m]
-    line_cd: float = 1.1  # cylinder drag coefficient of a line in cross flow (physics_facts 4.1, kitesim) [-]
+    # cylinder drag coefficient of a line in cross flow (awegroup/ASKITE, kitesim's bridle-line drag) [-]
+    line_cd: float = 1.1
     line_stiffness_N_per_m: float = 4.52e3  # k_c (Table 1) [N/m]
     line_damping_Ns_per_m: float = 251.7  # c_c (Table 1) [N s/m]
     power_line_length_m: float = 25.0  # rest lengths L_A = L_C (Table 1) [m]
@@ -188,17 +195,17 @@ class DynamicsConfig:
     gravity_mps2: float = 9.81  # [m/s^2]
     dt_s: float = 0.005  # fixed RK4 time step (the paper's adaptive RK45 averaged 5.3 ms) [s]
     baumgarte_1_per_s: float = 20.0  # constraint stabilisation rate of the tether and tip constraints [1/s]
-    # ground station (FlightSimulator, docs/flight_model.md sections 11 and 43): "fixed" = the paper's constant tether
+    # ground station (FlightSimulator, docs/model.md, "The ground station"): "fixed" = the paper's constant tether
     # length (Table 1); "force" = a winch with an upper force limit: it holds the tether at its length while the
     # tether force stays below winch_force_N and reels out above it (traction phase; no reel-in), the reel-out speed
     # following (F_t - winch_force_N) / winch_damping_Ns_per_m within [0, winch_speed_max_mps] with the time constant
     # winch_time_constant_s (after the winch models of Fechner et al. 2015, Renewable Energy 83, 705, and the
-    # force-limited reel-out of van der Vlugt et al. 2019, Renewable Energy 131, 83). The default since stop 46: the
+    # force-limited reel-out of van der Vlugt et al. 2019, Renewable Energy 131, 83). The default: the
     # paper's force controller (Eq. 18-19), meant "to keep the tension in the tether between a minimum and maximum
     # value" (Sect. II.D), cannot depower this four-point wing, and the paper names the real system's force control
     # as the ground station's (Sect. III); below the set force the flight is the paper's constant tether.
     winch: str = "force"
-    winch_force_N: float = 15000.0  # upper tether force limit of the ground station [N] (a set point: section 43)
+    winch_force_N: float = 15000.0  # upper tether force limit of the ground station [N] (a set point)
     winch_damping_Ns_per_m: float = 1000.0  # tether force rise per m/s of reel-out speed [N s/m]
     winch_speed_max_mps: float = 10.0  # [m/s]
     winch_time_constant_s: float = 0.5  # lag of the reel-out speed behind its set value [s]
@@ -208,8 +215,8 @@ class DynamicsConfig:
     # tether that would have to push ends the flight as "slack tether"); "rope" = a unilateral constraint that only
     # pulls: the KCU flies free inside the sphere when the tether would go slack, and its outward radial velocity
     # is removed (an inelastic jerk) when it reaches the sphere again (dynamics/dynamic_simulator.py). The wing with
-    # inertia's tether (the default since stop 33: a tether cannot push, and with the rod random steering ended every
-    # episode within 0.4 s, docs/flight_model.md, section 14); the quasi-static wing (structure.dynamic = false)
+    # inertia's tether (default: a tether cannot push, and with the rod random steering ended every
+    # episode within 0.4 s, docs/environment.md, "Random steering"); the quasi-static wing (structure.dynamic = false)
     # always flies the paper's rod: a slack tether unloads the bridle, which that wing cannot follow
     tether: str = "rope"
     coupling: str = "explicit"  # wing force over a step: explicit (held + condensed stiffness) | predictor_corrector
@@ -223,7 +230,8 @@ class DynamicsConfig:
 @dataclass(frozen=True)
 class ControlConfig:
     # the paper's steering (Eq. 14-17) and force (Eq. 18-19) controllers; gains not given in the paper
-    # gains chosen for this model's steering authority (docs/flight_model.md, "Controller gains"): the paper gives none
+    # gains chosen for this model's steering authority (docs/model.md, "Controller gains and the force loop"): the
+    # paper gives none
     k1_m_per_rad: float = 1.0  # heading error -> desired steering-line difference, Eq. (15) [m/rad]
     k2: float = 3.0  # steering-line length loops, Eq. (16-17) [-]
     k3_m: float = 0.5  # force-ratio loop, Eq. (19) [m]
@@ -236,16 +244,16 @@ class ControlConfig:
     control_dt_s: float = 0.02  # controller update period [s]
     # speed limit of the KCU's steering-line actuator, per controller period at most this times control_dt_s on
     # each axis of actuator_axes (kite_env.control.actuate); 0 = none, the paper's Eq. 16-17. 2 m/s (the default
-    # since stop 33, with the wing with inertia: a held full input otherwise moves the lines by metres in one
+    # with the wing with inertia: a held full input otherwise moves the lines by metres in one
     # controller period) is above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower
-    # (docs/flight_model.md, section 13) [m/s]
+    # (docs/model.md, "Large steering inputs") [m/s]
     line_speed_max_mps: float = 2.0
     # how that limit acts: "steer_depower" = as the KCU's two motors, a steering motor for the difference and a
     # depower motor for the common change of both lines (van der Vlugt et al., "Design and experimental
     # characterization of a pumping kite power system", in Airborne Wind Energy, Springer 2013, ch. 23; Fechner et
     # al., Renewable Energy 83, 705, 2015): half the difference (L_B - L_D)/2 and the mean (L_B + L_D)/2 each move
-    # at most line_speed_max_mps; "per_line" = each rest length on its own (stops 25-27: a saturated steering
-    # command then leaves the force loop no speed at all, docs/flight_model.md, section 16)
+    # at most line_speed_max_mps; "per_line" = each rest length on its own (a saturated steering
+    # command then leaves the force loop no speed at all, docs/environment.md, "The KCU's two motors")
     actuator_axes: str = "steer_depower"
 
 
@@ -257,8 +265,8 @@ class SimConfig:
     initial_speed_mps: float = 0.0
     # the initial speed as a multiple of wind.speed_mps where initial_speed_mps is 0: a kite's crosswind speed grows
     # in proportion to the wind (Loyd 1980, J. Energy 4(3), 106); 4.4 gives the paper's 22 m/s at its 5 m/s. From
-    # 22 m/s at 10 m/s the wing starts at half its flight speed and folds in the acceleration (docs/flight_model.md,
-    # sections 12 and 22) [-]
+    # 22 m/s at 10 m/s the wing starts at half its flight speed and folds in the acceleration
+    # (docs/environment.md, "Starts") [-]
     initial_speed_per_wind: float = 4.4
     fidelity: str = "fe"  # wing model: fe (the aeroelastic FE wing) | surrogate (reduced-order wing, kite_env.surrogate)
     surrogate_path: str = ""  # surrogate weights (.npz); empty: the model shipped for kite.name

@@ -40,7 +40,8 @@ from kite_env.config import ControlConfig
 # Below this tension of the power lines (F_cA + F_cC) the force ratio of Eq. 18 is not defined (an unloaded wing,
 # slack bridle lines: 0/0); the force loop then holds (error 0) instead of acting on a ratio of two noise levels.
 # Without it, a luffing wing whose power lines carry 1e-9 N while a steering line carries 1 N gave mu = 1e9 and
-# rest lengths of 1e10 m (the constant:1 flight of the wing with inertia on a rope tether, docs/flight_model.md).
+# rest lengths of 1e10 m (the constant:1 flight of the wing with inertia on a rope tether, docs/model.md, "Large
+# steering inputs").
 POWER_LINES_MIN_N = 100.0
 
 

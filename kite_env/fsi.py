@@ -157,7 +157,7 @@ class AeroelasticWing:
         GJ[te] = np.maximum(GJ[te], s.te_hem_EI_Nm2 / (1.0 + _NU_ROD))
         # structure.te_hem_element: "rod" takes the hem out of the co-rotational beams (their rows stay, without
         # stiffness, so that the beams keep the mesh's numbering) into frame-free rods with its axial, bending and
-        # torsional stiffness (kite_env.structure.hem; docs/flight_model.md, section 37)
+        # torsional stiffness (kite_env.structure.hem; docs/model.md, "The trailing-edge hem")
         self.hem = None
         if s.te_hem_element == "rod" and np.any(te):
             self.hem = HemSet(mesh.beams[te], mesh.nodes, np.asarray(mesh.beam_up)[te], EA[te],
@@ -370,7 +370,7 @@ class AeroelasticWing:
         """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
         of ``h0`` (``1 / fsi.cold_load_steps``) by :meth:`_continuation`. From the unloaded wing, whose canopy is
         slack and whose tangent is nearly singular, the fixed first sixth of the load was too far for Newton in 20 %
-        of the randomized starts of ``scripts/end_reasons.py`` (docs/flight_model.md, section 17)."""
+        of the randomized starts of ``scripts/end_reasons.py`` (docs/model.md, "The conservative tube law")."""
         return self._continuation(state, 0.0, last, h0,
                                   lambda st, scale: step(st, q_b, flight, dt, support, scale, history)[0], history)
 
@@ -526,7 +526,8 @@ class AeroelasticWing:
         # a cold solve whose load ramp fails is made again from the unloaded wing with a ramp of twice (then four
         # times) as many steps: the ramp's intermediate states depend on its steps, and on finer chordwise meshes the
         # default ramp passes through states without a stable equilibrium nearby (a sideways mode of the mid-wing's
-        # leading edge fed by the loads, docs/flight_model.md, section 31); only the path to the equilibrium changes
+        # leading edge fed by the loads, docs/validation.md, "Mesh refinement, L/D, the figure's elevation"); only the
+        # path to the equilibrium changes
         restarts = self.COLD_RESTARTS if cold else 0
         tension0 = self.lines.tension.copy() if restarts else None
         first = None
@@ -589,7 +590,7 @@ class AeroelasticWing:
         # and the C_M continuation with the larger-end law, whose secant iteration converges there, and makes its
         # last solve from that equilibrium with the exact tangent of the conservative law. On the secant alone its
         # C_M continuation stagnated (a few N above the tolerance) and the cold start of tests/dynamics/test_flight.py
-        # failed (docs/flight_model.md, sections 15 and 17). Only the path changes.
+        # failed (docs/model.md, "Energy", "The conservative tube law"). Only the path changes.
         law_continuation = cold and self.cfg.structure.tube_curvature == "element_energy"
         if law_continuation:
             self._tube_law = "max_end"

@@ -266,7 +266,7 @@ def compute_metrics(log: FlightLog, cfg: Config) -> dict:
     m["tip_displacement_right_variation_m"] = _stat(tr, np.ptp)
     # the paper's Fig. 18: the transverse (y_k) displacement of the bridle points A, B, C, D from the design; a
     # tip's variation (Sect. IV: "varies in total by 0.3 m") is the larger of its two points' (A, B right; C, D left)
-    by = s("bridle_y") if "bridle_y" in log.series else np.empty((0, 4))  # (logs written before stop 42: none)
+    by = s("bridle_y") if "bridle_y" in log.series else np.empty((0, 4))  # (older logs have none)
     var = {name: _stat(by[:, j], np.ptp) for j, name in enumerate("ABCD")}
     for name, v in var.items():
         m[f"bridle_{name}_y_variation_m"] = v

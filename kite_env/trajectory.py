@@ -14,11 +14,11 @@ Heading / course (:func:`heading_angle`)
     ``psi = atan2(v . y_s, v . x_s)`` in (-pi, pi]: the angle of the tangent-plane projection of ``v`` measured
     from ``x_s`` towards ``y_s`` (paper, Sect. III.A step 4).
 
-Lemniscate (physics_facts.md 5.1, the MegAWES parametrisation of the Bernoulli lemniscate on the sphere)
+Lemniscate (awegroup/MegAWES, getPointOnBooth.m: the MegAWES parametrisation of the Bernoulli lemniscate on the sphere)
     ``lambda(s) = -b sin s / D``,  ``phi(s) = a sin s cos s / D``,  ``D = 1 + (a/b)^2 cos^2 s``,  s in [0, 2 pi)
     ``p_P = [cos lambda cos phi, sin lambda cos phi, sin phi]``,  ``p_W = R_z(azimuth) R_y(elevation) p_P``
-    with ``R_y`` as in physics_facts 5.1 (maps ``x_P`` to elevation ``beta0`` in the ``x_w``-``z_w`` plane).
-This is the physics_facts curve with its parameter shifted by pi (``s -> s + pi`` flips the sign of lambda and
+    with ``R_y`` as in MegAWES (maps ``x_P`` to elevation ``beta0`` in the ``x_w``-``z_w`` plane).
+This is MegAWES's curve with its parameter shifted by pi (``s -> s + pi`` flips the sign of lambda and
 keeps phi), i.e. the same curve flown in the same direction, started on the other lobe. Travel is towards
 increasing ``s``. The self-crossing is at ``s = 0`` and ``s = pi``, at exactly the configured mean elevation and
 azimuth. The kite flies UPWARD through the crossing and DOWNWARD at the sides ("downloops"), as in the paper
@@ -40,7 +40,8 @@ constant 80 m tether and computed flight speeds of 18-28 m/s, Sect. IV): width 1
 elevation, crossing at 30 deg elevation. The wing flies at the tether length plus the bridle (80 + 25 m), so the
 path on the unit sphere (4.7 rad long) is about 490 m for the wing: one figure in about 19-22 s at the paper's
 mean speeds of 22-25 m/s (:meth:`Lemniscate.period_estimate` with 105 m). This is wider than common AWE practice
-(physics_facts 5.2-5.3: Schelbergen +-18.5-20 deg azimuth, +-4 deg elevation; Fechner 36 deg width, 24 deg
+(markschelbergen/awe-production-estimation, qsm.py, and aenarete/KiteControllers.jl: Schelbergen +-18.5-20 deg
+azimuth, +-4 deg elevation; Fechner 36 deg width, 24 deg
 elevation), which would give figures of 8-12 s at these speeds; the paper's 20 s figure needs the large one.
 """
 
@@ -155,7 +156,7 @@ def geodesic_distance(r1: np.ndarray, r2: np.ndarray) -> np.ndarray | float:
 # ---------------------------------------------------------------------------------------------- lemniscate
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    # sized from the model's turn rate (docs/flight_model.md, "The figure-eight"): lobes from 15.2 to 55.2 deg
+    # sized from the model's turn rate (docs/model.md, "The figure-eight"): lobes from 15.2 to 55.2 deg
     # elevation, smallest radius 36.5 m on the 105 m sphere; the paper's 120 x 36 deg at 30 deg reaches 6.5 deg
     width_deg: float = 100.0  # full azimuth span of the figure-eight [deg]
     height_deg: float = 40.0  # full elevation span of the figure-eight [deg]
@@ -217,7 +218,7 @@ def _chart(s: np.ndarray, a: float, b: float) -> tuple[np.ndarray, ...]:
 
 
 def _rotation(elev: float, azim: float) -> np.ndarray:
-    """``R_z(azim) @ R_y(elev)`` with R_y as in physics_facts 5.1 (x_P -> elevation ``elev``)."""
+    """``R_z(azim) @ R_y(elev)`` with R_y as in MegAWES (x_P -> elevation ``elev``)."""
     ce, se, ca, sa = math.cos(elev), math.sin(elev), math.cos(azim), math.sin(azim)
     r_y = np.array([[ce, 0.0, -se], [0.0, 1.0, 0.0], [se, 0.0, ce]])
     r_z = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]])

@@ -13,8 +13,10 @@ paper's Fig. 16 (its two axis scales, +-0.3 m against +-1.5 rad/s), about 2.5-5 
 
 Why it is what it is, on the static wing: :func:`steering_point_stiffness` (how much of a steering input moves the
 wing, and what holds the steering points) and :func:`lateral_balance` (the steady turn in which the steered wing's
-side force and yaw moment vanish); docs/flight_model.md, section 26. The wing's yaw/twist mode on its lines:
-:func:`tethered_wing_yaw_response` and its linearisation :func:`tethered_wing_modes` (sections 27-28).
+side force and yaw moment vanish); docs/steering.md, "Where a steering input goes". The wing's yaw/twist mode on its
+lines:
+:func:`tethered_wing_yaw_response` and its linearisation :func:`tethered_wing_modes` (docs/steering.md, "The open-loop
+turn rate", "The yaw rig").
 """
 
 from __future__ import annotations
@@ -64,9 +66,9 @@ def open_loop_flight(cfg: Config, dl_m: float, t_hold_s: float = 0.5, window_s: 
     force_loop : bool
         Run the paper's force controller (Eq. 18-19 with ``control.k3i_per_s``) on the common rest length of both
         steering lines, as in the paper's flight of Fig. 16, and move the rest lengths through the KCU's motors
-        (:func:`kite_env.control.actuate`). ``False``: both rest lengths held (before stop 39): the kite climbs,
+        (:func:`kite_env.control.actuate`). ``False``: both rest lengths held: the kite climbs,
         mu drifts and a steering line goes slack within the window (at 10 m/s both), so the yaw rate then measures
-        a wing hanging on its power lines (docs/flight_model.md, section 27).
+        a wing hanging on its power lines (docs/steering.md, "The open-loop turn rate").
     """
     path = Lemniscate(cfg.trajectory)
     sim = make_simulator(cfg, WindField(cfg.wind))
@@ -149,7 +151,7 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     point moved (the static condensation of the tangent ``K_T - dF_a/dx`` onto that point's line direction).
 
     This says where a steering input goes: a change ``dL`` of a line's rest length moves its wing point by
-    ``share dL`` and stretches the line by the rest (docs/flight_model.md, section 26).
+    ``share dL`` and stretches the line by the rest (docs/steering.md, "Where a steering input goes").
     """
     from kite_env.fsi import load_jacobian
     from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
@@ -239,7 +241,8 @@ def lateral_balance(cfg: Config, airspeed_mps: float, alpha_rad: float, delta_m:
     ``r``. Setting ``Y_delta delta + Y_beta beta + Y_r r = 0`` and ``N_delta delta + N_beta beta + N_r r = 0`` (the
     wing's mass, gravity and the tether neglected) gives ``r / delta = (Y_beta N_delta - N_beta Y_delta) / (N_beta Y_r
     - Y_beta N_r)``; a change ``dL`` of ``L_B - L_D`` moves each point by ``share dL / 2``
-    (:func:`steering_point_stiffness`), towards the KCU at B for ``dL < 0``. docs/flight_model.md, section 26.
+    (:func:`steering_point_stiffness`), towards the KCU at B for ``dL < 0``. docs/steering.md, "Where a steering input
+    goes".
     """
     from kite_env.fsi import FlightState
     from kite_env.polar import nominal_wing
@@ -313,7 +316,7 @@ def _tethered_wing_rig(cfg: Config, airspeed_mps: float, alpha_rad: float, settl
     ``y_k``; its reactions are not along the lines. With rest lengths ``l - |F_b| / k_c`` the free wing is therefore
     not in equilibrium there: it surges 0.96 m forward (a 0.6 Hz swing on its lines, up to 2.8 m/s) and settles
     within about 10 s. The wing is released from the static shape at rest and stepped for ``settle_s``, which leaves
-    it moving at about 1e-4 m/s (docs/flight_model.md, section 28)."""
+    it moving at about 1e-4 m/s (docs/steering.md, "The yaw rig")."""
     from kite_env.dynamics.wing_dynamics import WingDynamics
     from kite_env.fsi import FlightState
     from kite_env.polar import nominal_wing
@@ -343,7 +346,7 @@ def tethered_wing_yaw_response(cfg: Config, airspeed_mps: float = 30.0, alpha_ra
 
     The rig isolates the yaw/twist oscillation of the flying wing (3.9 Hz in the baseline flight), a mode of the
     wing on its lines (the wing held at A-D shows none); :func:`tethered_wing_modes` linearises it
-    (docs/flight_model.md, sections 27-28)."""
+    (docs/steering.md, "The open-loop turn rate", "The yaw rig")."""
     dyn, kcu, rest, flight = _tethered_wing_rig(cfg, airspeed_mps, alpha_rad, settle_s)
     dt = dyn.wing.cfg.dynamics.dt_s
     x0 = dyn.state.x
@@ -387,7 +390,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
                         settle_s: float = 12.0, h_mps: float = 1e-4, rigid_inflow: bool = True) -> WingModes:
     """The rig of :func:`tethered_wing_yaw_response` linearised at rest on its lines: ``M q'' + D q' + K q = 0`` on
     the nodes' translations, the rotations condensed statically (the nodes' rotary inertia does not change the
-    rig's response, docs section 27).
+    rig's response, docs/steering.md, "The open-loop turn rate").
 
     ``K``: the structure's tangent and the step's external stiffness (:meth:`_StepLoad.operators`: the section loads
     at the held inflow, the bridle lines). ``M``: the nodal mass blocks with the added mass. ``D = -df/dv`` by

@@ -9,8 +9,9 @@ Mean wind (along ``x_w``, depends on the height ``z = r_z`` only)
     log:     ``U(z) = U_ref ln(z / z0) / ln(z_ref / z0)``, with ``z`` clipped to ``>= z0`` (zero at and below ``z0``)
     power:   ``U(z) = U_ref (z / z_ref)^a``, with ``z`` clipped to ``>= 0`` (zero at and below the ground)
 ``U_ref = speed_mps`` at ``z_ref = ref_height_m``. Default roughness ``z0 = 0.0002 m`` and the log law follow the
-wind-profile defaults of KiteUtils.jl (physics_facts.md 4.2); ``a = 0.14`` is the usual open-terrain power-law
-exponent (modelling choice; physics_facts 4.2 lists 0.08163 for Fechner's setting).
+wind-profile defaults of KiteUtils.jl (OpenSourceAWE/KiteUtils.jl, data/settings.yaml); ``a = 0.14`` is the usual
+open-terrain power-law
+exponent (modelling choice; KiteUtils.jl uses 0.08163 in Fechner's setting).
 
 Turbulence (frozen field, Taylor's hypothesis)
     ``u_j(t, r) = sum_n A_jn cos(k_jn . (r - U_ref t e_x) + theta_jn)``,  ``j = u, v, w`` (components along W)
@@ -120,7 +121,7 @@ class WindConfig:
     speed_mps: float = 5.0  # mean wind speed at the reference height (paper, Fig. 9) [m/s]
     profile: str = "uniform"  # mean profile: uniform | log | power
     ref_height_m: float = 10.0  # reference height of speed_mps [m]
-    roughness_m: float = 0.0002  # log-law roughness length z0 (physics_facts 4.2) [m]
+    roughness_m: float = 0.0002  # log-law roughness length z0 (KiteUtils.jl's default) [m]
     shear_exponent: float = 0.14  # power-law exponent a [-]
     turbulence_intensity: float = 0.0  # sigma_u / speed_mps [-]
     turbulence_length_m: float = 100.0  # longitudinal integral length scale L [m]

@@ -1,4 +1,4 @@
-"""Benchmark the trained agents against the baseline and random actions on held-out seeds (issue 6).
+"""Benchmark the trained agents against the baseline and random actions on held-out seeds.
 
     python scripts/benchmark_agents.py --out runs/benchmark [--policies baseline ppo sac random] [--episodes 20]
         [--seed 1000] [--fidelity surrogate fe] [--duration S] [--recipe agents/recipes/ppo.yaml] [--set k=v ...]

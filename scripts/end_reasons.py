@@ -1,4 +1,4 @@
-"""Why episodes end: run ``kite-eval`` over many randomized episodes and count the end reasons (issue 20's check).
+"""Why episodes end: run ``kite-eval`` over many randomized episodes and count the end reasons.
 
     python scripts/end_reasons.py --episodes 50 --duration 30 --jobs 2 --out runs/end_reasons [--policy random]
         [--set section.key=value ...]

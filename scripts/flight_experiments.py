@@ -16,7 +16,8 @@ trim      both steering rest lengths shortened by --shorten after the reset, the
 damp      the pair dampers (A-C, B-D, A-D, B-C) multiplied by --factor after the reset, then the baseline.
 timestep  the baseline (kite-eval's flight) at each time step of --steps: Newton iterations per step, and against the
           first step the largest distance of the KCU at the common instants and the mean traction after 1 s
-          (issue 19's time-step check; docs/flight_model.md, sections 19 and 23).
+          (the time-step check; docs/validation.md, "Time-step convergence"; docs/performance.md, "Newton's
+          iterations").
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ the C-shaped arc's projection ``|sum_i L_i| / sum_i |L_i|`` (the sections' lifts
 their drags add up); the mid-wing angle of attack; and the wing's stiffness at the steering point B along its line
 with A, C, D held (``kite_env.turn_rate.steering_point_stiffness``) with the share of a steering input that moves
 the wing against Table 1's line. A mesh whose cold solve does not reach an equilibrium is reported as such.
-docs/flight_model.md, section 31.
+docs/validation.md, "Mesh refinement, L/D, the figure's elevation".
 """
 
 from __future__ import annotations

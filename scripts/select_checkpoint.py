@@ -1,4 +1,4 @@
-"""Pick the checkpoint of a kite-train run to ship: the best mean return on validation seeds (issue 6).
+"""Pick the checkpoint of a kite-train run to ship: the best mean return on validation seeds.
 
     python scripts/select_checkpoint.py RUN_DIR [--episodes 200] [--seed 4000] [--every 1] [--min-steps 0]
         [--ship agents/models/NAME] [--force]
@@ -10,8 +10,8 @@ controller flies the same episodes for reference. The validation seeds (default 
 held-out benchmark seeds (1000-1019, ``scripts/benchmark_agents.py``), the tests' seeds (2000-2011 and 3050-3199,
 ``tests/agents/test_shipped.py``) and training (kite-train's own seeds and its evaluations, 10000 and up), so that
 the benchmark and the tests stay an honest test of the checkpoint chosen here. 200 episodes, because the returns
-spread by ~130 (most flights end within a few seconds): with 50 (the default until stop 17, seeds 3000-3049) the
-best of 60 checkpoints of the stop-17 PPO run led the baseline by 21.6 on them and by 2.2 on 200 others.
+spread by ~130 (most flights end within a few seconds): with 50 (seeds 3000-3049) the
+best of 60 checkpoints of an earlier PPO run led the baseline by 21.6 on them and by 2.2 on 200 others.
 
 Prints one row per checkpoint (mean/std return, mean flight time, crashes) and writes ``RUN_DIR/selection.json``.
 ``--ship DIR`` copies the best checkpoint into ``DIR`` as ``model.zip`` + ``vecnormalize.pkl`` with the run's

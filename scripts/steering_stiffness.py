@@ -11,7 +11,7 @@ wing point by ``share dL``, ``share = k_line / (k_line + k_wing)``; the rest str
 ``dynamics.line_stiffness_N_per_m``, Table 1: 4.52 kN/m). Columns: the stiffness with the aerodynamic loads
 following the shape (``coupled``) and held (``frozen``) [kN/m], each group's ``u^T K_g u`` along the coupled
 deformation [kN/m] (``aero`` is minus the work the loads do), the share, and the pitch change of the point's tip
-section per metre [deg/m]. docs/flight_model.md, section 26.
+section per metre [deg/m]. docs/steering.md, "Where a steering input goes".
 """
 
 from __future__ import annotations

@@ -3,13 +3,14 @@
 The paper (Sect. II.B, text after Eq. 9) describes the section coefficients as correlations of camber ``kappa``,
 thickness ``t`` and angle of attack ``alpha``, fitted to 2-D RANS results and "valid for -20 deg < alpha < 20 deg";
 outside that range "CL and CD are described by the empirical functions proposed in [35]". The correlation is
-Breukels' (2011) regression. Its structure and constants C20..C62 are transcribed in physics_facts.md 1.2-1.3 from
+Breukels' (2011) regression. Its structure and constants C20..C62 are transcribed from
 three open TU Delft codes that agree: [S1] awegroup/Vortex-Step-Method ``AirfoilAerodynamics``, [S2]
 OpenSourceAWE/VortexStepMethod.jl ``src/panel.jl``, [S3] a ``LEI_airf_coeff`` thesis helper. The polynomials take
 alpha in **degrees**; this module takes radians and converts internally.
 
 Post-stall (|alpha| > 20 deg). The open codes switch hard to the Newtonian flat-plate law ``CL = 2 cos a sin^2 a``,
-``CD = 2 sin^3 a`` (physics_facts 1.4), which is discontinuous at 20 deg (CL 1.17 -> 0.22) and has the wrong sign
+``CD = 2 sin^3 a`` (the open TU Delft codes' stall law), which is discontinuous at 20 deg (CL 1.17 -> 0.22) and has the
+wrong sign
 for alpha < -20 deg. Here the sign-correct flat-plate law (normal-force coefficient ``C_N = 2 sin a |sin a|``)
 
     CL_fp = 2 cos(a) sin(a) |sin(a)|,   CD_fp = 2 |sin(a)|^3,   CM_fp = -C_N (0.5 - x_ref/c)
@@ -25,12 +26,12 @@ tangent line (not the polynomial itself) is continued into the band because the 
 negative beyond 20 deg (CL_poly(25 deg) = -0.47 for t = 0.1, kappa = 0.095) and would flip the sign of lift there.
 CD and CM polynomials are even in alpha and so is their continuation; CL_fp is odd.
 
-Pitching moment. The regression CM grows like -0.007 alpha_deg^2 (physics_facts 1.4 caveat: -2.75 at 20 deg),
+Pitching moment. The regression CM grows like -0.007 alpha_deg^2 (-2.75 at 20 deg for t = 0.1, kappa = 0.095),
 and the open codes keep the polynomial beyond 20 deg. Here CM is blended like CL, CD to the flat-plate moment of a
 plate whose normal force acts at mid-chord, taken about the moment reference point ``x_ref`` (measured from the
 airfoil leading edge = front of the LE tube): ``CM_fp = -C_N (0.5 - x_ref/c)``; positive CM is nose-up.
 
-Moment reference point. Breukels' thesis text is not reachable (physics_facts 1b). The open code that carries this
+Moment reference point. Breukels' thesis text was not reachable. The open code that carries this
 regression states that its CM column is the "pitching moment coefficient (dimensionless, about quarter-chord)"
 (awegroup/Vortex-Step-Method, docs/AirfoilAerodynamics.md, "Data Format Standards", commit 46fd9f83), and
 OpenSourceAWE/VortexStepMethod.jl issue #17 moves the regression CM with ``M_x = M_quarter + L (x - 0.25)``. We
@@ -90,7 +91,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Upper end of the regression's validity range [deg] (paper, text after Eq. 9; physics_facts 1.4).
+#: Upper end of the regression's validity range [deg] (paper, text after Eq. 9; the open VSM codes switch there too).
 ALPHA_POLY_MAX_DEG = 20.0
 #: |alpha| [deg] from which the pure flat-plate law is used (end of the C1 transition band).
 ALPHA_FP_MIN_DEG = 30.0
@@ -116,7 +117,7 @@ CM_NEG_ADD = 0.09
 #: Angle scale of the tanh in the CM increment [deg].
 ALPHA_NEG_CM_WIDTH_DEG = 3.0
 
-# Breukels' LEI airfoil constants C20..C62 (physics_facts.md 1.3; [S1], [S2], [S3] agree).
+# Breukels' LEI airfoil constants C20..C62 (awegroup/Vortex-Step-Method and OpenSourceAWE/VortexStepMethod.jl agree).
 C20, C21, C22 = -0.008011, -0.000336, 0.000992
 C23, C24, C25 = 0.013936, -0.003838, -0.000161
 C26, C27, C28 = 0.001243, -0.009288, -0.002124
@@ -133,7 +134,7 @@ C59, C60, C61, C62 = -1.787703, 0.352443, -0.839323, 0.137932
 # The eight alpha-polynomial coefficients are linear in the features
 #   phi = [t^2, t, 1, kappa t^2, kappa t, kappa, kappa^2 t^2, kappa^2 t, kappa^2]
 # Rows: lambda5, lambda6, lambda7, lambda8 (CL = l5 a^3 + l6 a^2 + l7 a + l8), CD_2, CD_0 (CD = CD_2 a^2 + CD_0),
-# CM_2, CM_0 (CM = CM_2 a^2 + CM_0), with a in degrees (physics_facts 1.2).
+# CM_2, CM_0 (CM = CM_2 a^2 + CM_0), with a in degrees (Breukels 2011, as coded in the VSM codes).
 _COEF = np.array(
     [
         # t^2   t     1     k t^2  k t   k     k^2 t^2  k^2 t  k^2
@@ -184,7 +185,7 @@ def _smoothstep(u):
 
 
 def flat_plate_coefficients(alpha, x_ref_over_c=X_REF_OVER_C_DEFAULT):
-    """Sign-correct Newtonian flat-plate law (physics_facts 1.4) with its moment about ``x_ref``.
+    """Sign-correct Newtonian flat-plate law (C_N = 2 sin^2 alpha, as in the VSM codes) with its moment about ``x_ref``.
 
     Parameters
     ----------

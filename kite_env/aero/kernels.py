@@ -26,7 +26,7 @@ Cost, measured on the shared 2-core development container (best of repeats, pert
 frames (:func:`_section_axes`, shared with the loads' kernel) in one loop: the force costs about 12 us per call
 (with the sections gathered from the nodes and scattered back) where the NumPy path (the full loads kernel for the
 frames, the 3/4-chord weights, the force) took about 64 us at every Newton iterate, 9 % of the baseline flight's
-step (docs/flight_model.md, section 39).
+step (docs/performance.md, "Theodorsen's force compiled").
 
 Backend selection is done by :func:`kite_env.aero.loads.section_loads` (``backend="auto" | "numba" | "numpy"``,
 resolved by :func:`kite_env.structure.kernels.resolve_backend`: environment variable ``KITE_ENV_ELEMENT_BACKEND``,
@@ -76,7 +76,7 @@ _CD_NEG_ADD = 0.05
 _CM_NEG_ADD = 0.09
 _ALPHA_NEG_CM_WIDTH_DEG = 3.0
 
-# Breukels' constants C20..C62 (breukels.py, physics_facts.md 1.3), grouped as the eight alpha-polynomial
+# Breukels' constants C20..C62 (breukels.py), grouped as the eight alpha-polynomial
 # coefficients, each a + b kappa + c kappa^2 with a, b, c quadratics in t (rows of breukels._COEF):
 #   coef = (A0 t^2 + A1 t + A2) + kappa (B0 t^2 + B1 t + B2) + kappa^2 (D0 t^2 + D1 t + D2)
 # lambda5..8 (CL), CD_2, CD_0, CM_2, CM_0; zero entries of breukels._COEF are omitted below.

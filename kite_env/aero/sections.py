@@ -16,7 +16,8 @@ Section frame (Fig. 4; frame definitions in COMMON brief / :mod:`kite_env.frames
     from the LE tangent (fully at 60 deg): a mean offset along the span, as of the nodes of a slack, wrinkled
     canopy, spans no airfoil plane, and the orientation of its normal flips where it crosses 90 deg, which without
     this blend made ``e_y`` and the angle of attack jump (by 12 deg in a sideways-bent section: Newton then cycled
-    between the two sides of the jump; docs/flight_model.md, section 18). The LE tangent alone would be wrong at the strongly curved tips of a
+    between the two sides of the jump; docs/model.md, "Section frame, fold contact, rotary inertia"). The LE tangent
+    alone would be wrong at the strongly curved tips of a
     C-shaped wing, where the section planes are not perpendicular to the LE line (12 deg on the rhino16 tips).
 
 Our reading of the partly garbled equations of Sect. II.B (fragments of the extracted seed text in brackets):

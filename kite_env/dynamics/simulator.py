@@ -45,7 +45,7 @@ class SimulationError(RuntimeError):
 
 class NumericalFailure(SimulationError):
     """A step of the wing with inertia that failed even when made in halves down to its smallest sub-step, or a
-    non-finite state: a bug of the simulator, never an episode end (issue 20; docs/flight_model.md, section 40).
+    non-finite state: a bug of the simulator, never an episode end (docs/environment.md, "NumericalFailure").
     Raised by the environment's ``step``; the message has the time, the conditions of the episode and the wing
     solver's residual history."""
 
@@ -237,7 +237,7 @@ class FlightSimulator:
         apparent wind closer to the chord, a smaller angle of attack), then the speed is brought back to the
         start's in warm solves by :meth:`AeroelasticWing._continuation` (a quarter of the way at most, halved where
         a solve fails). Where the cold solve failed, a start in turbulence at 4 m/s (17.6 m/s: the inflow 11 deg off
-        the path) had no converged wing and the env drew the start again (docs/flight_model.md, section 22)."""
+        the path) had no converged wing and the env drew the start again (docs/environment.md, "Starts")."""
         wing = self.wing
         errors = [str(first).splitlines()[0]]
         for f in self.START_SPEED_FACTORS:
@@ -342,7 +342,8 @@ class FlightSimulator:
         A step whose wing solve does not converge is repeated as two half steps, each of them halved again where it
         fails, down to ``dt / 2**dynamics.max_substep_halvings`` (a quasi-static wing passing through a luffing
         event follows its aerodynamically damped motion, whose backward-Euler step matrix ``K_T - J + C/dt`` is
-        positive definite again for a small enough step; docs/flight_model.md, section 10). The record's
+        positive definite again for a small enough step; docs/validation.md, "The overloaded wing on the constant
+        tether"). The record's
         ``substeps`` says how many steps were made (1: none split). Only a sub-step of the smallest size that still
         fails raises :class:`SimulationError`, with the wing's message.
         """

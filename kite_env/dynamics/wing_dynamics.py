@@ -2,31 +2,33 @@
 
 The paper's wing is quasi-static: its 10 kg sit in four particles A-D, and the FE wing is solved for equilibrium at
 the bridle points the particles prescribe (Sect. II.D). Such a wing has no state to carry it through an event where
-no nearby equilibrium exists (a luffing or folding canopy): the step fails (docs/flight_model.md, section 10). Here
+no nearby equilibrium exists (a luffing or folding canopy): the step fails (docs/validation.md, "The overloaded wing on
+the constant tether"). Here
 the wing has mass and moves:
 
 * **Mass.** The lumped nodal masses of :func:`kite_env.dynamics.wing_mass.nodal_wing_mass` (Table 1's total, 70 %
   on the LE tube), of which ``dynamics.wing_point_mass_share`` sits as Table 1's point masses on A-D (the tips'
   inertia: spread by area alone, B and D get 1.7 g and the released tip diverges within 0.2 s of the start;
-  docs/flight_model.md, section 12), on the translations. The rotations are massless (quasi-static) by default;
+  docs/model.md, "The wing with inertia"), on the translations. The rotations are massless (quasi-static) by default;
   ``structure.rotary_inertia_factor`` > 0 gives each node an isotropic rotary inertia, the factor times
   ``m (a^2 + b^2) / 24`` of its tributary rectangle (:func:`kite_env.dynamics.wing_mass.nodal_rotary_inertia`),
   integrated with the translations' Newmark rule on the step's spatial rotation vector. With massless rotations
   the step's tangent keeps the static rotational stiffness, near-singular (the canopy's drilling and bending,
-  3e-4 N m/rad) and indefinite in a fold, at any step size (docs/flight_model.md, section 14).
+  3e-4 N m/rad) and indefinite in a fold, at any step size (docs/environment.md, "Random steering").
   A-D are wing nodes: the partition moves to the bridle lines, the KCU and the tether stay in the particle model.
 * **Added mass** of the air moved by the canopy normal to its chord: the 2-D flat plate's ``rho pi c^2 / 4`` per
   unit span (Newman, *Marine Hydrodynamics*, MIT Press 1977, Sect. 4.13, table of added masses), with
   the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
   on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
   added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length. Its
-  force is ``M_a a`` plus, by default (``structure.added_mass_force = "normal_velocity_rate"``, since stop 44), the
+  force is ``M_a a`` plus, by default (``structure.added_mass_force = "normal_velocity_rate"``), the
   part of Theodorsen's non-circulatory load that ``M_a a`` misses (:meth:`WingDynamics.normal_rate_force`);
   ``"nodal_acceleration"`` keeps ``M_a a`` alone.
 * **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
   inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
-  damping of each section's deviation from it, rotation and deformation together, through the section damping of
-  issue 19 (``W^T C W`` with the velocity sampled at the 3/4-chord point, Pistolesi's point as
+  damping of each section's deviation from it, rotation and deformation together, through the consistent section damping
+  (docs/model.md, "Aerodynamic damping"; ``W^T C W`` with the velocity sampled at the 3/4-chord point, Pistolesi's
+  point as
   ``aero.rotation_point``; dissipative by construction): Eq. (2)'s ``v_k + omega x r + u`` taken from the wing's
   own nodes.
 * **Structural damping**: stiffness-proportional (Rayleigh) ``beta K_T(x_n)`` on the nodal translations, acting on
@@ -123,14 +125,14 @@ class _StepLoad:
     """External and inertial forces of one generalized-alpha step as a function of the Newton iterate (the load
     protocol of :meth:`StaticSolver.solve`).
 
-    Section loads (the quasi-steady split of issue 19's consistent damping, now with the wing's own motion): the
+    Section loads (the quasi-steady split of the consistent section damping, now with the wing's own motion): the
     loads of Eq. (2-9) at the iterate's shape with the inflow of the wing's rigid translation ``u_ref`` (the
     mass-weighted rigid fit of the wing's velocities at the start of the step, held over it), plus the damping
     forces of each section's deviation ``u_i = sum_j W_ij v_ij - u_ref`` from it, ``f_ij = -W_ij C_i u_i``, with the
     section damping ``C_i = -dF_i/du`` of :func:`kite_env.aero.loads.section_damping` (symmetric part positive
     semi-definite). The velocity is sampled and the force returned with the same weights ``W``
     (:meth:`WingDynamics.section_weights`), so the nodal damping matrix ``W^T C W`` dissipates energy for every motion
-    of the nodes. Two alternatives were linearised or flown and rejected (docs/flight_model.md, section 12): the
+    of the nodes. Two alternatives were linearised or flown and rejected (docs/model.md, "The wing with inertia"): the
     inflow of the 3/4-chord point's own velocity with the load change spread by the moment law of Eq. 9 lets a
     single trailing-edge node drive itself (a TE flutter at 20-80 Hz growing at 10-26 1/s); the rigid rotation in
     the reference inflow (its load change spread by the moment law, one step behind) drives the 3 Hz yaw/twist mode.
@@ -168,7 +170,7 @@ class _StepLoad:
         # the forces of the step's end (where generalized-alpha takes them) by one step, a first-order error: the KCU
         # of the 10 s baseline then drifted 39 cm along the path at dt = 10 ms against 5 ms (2.5 ms: 19.5 cm), the
         # mean traction +0.34 % (-0.27 %); with the end-of-step evaluation a few centimetres and below 0.1 %
-        # (docs/flight_model.md, section 19)
+        # (docs/validation.md, "Time-step convergence")
         wing, mesh = dyn.wing, dyn.wing.mesh
         at = dyn.state if at is None else at
         x_sec0 = at.x[mesh.sections]
@@ -178,7 +180,8 @@ class _StepLoad:
             # deviation damping acts on all of the deformation velocity. The flight's reference below, the rigid fit
             # of the nodes' velocities, would take a part of the deformation (the trailing edge's motion) for a rigid
             # motion and feed it back into every section's inflow: a held wing with half its structural mass and no
-            # added mass grew unstable at 5 ms with it, the default one from 44 m/s (docs/flight_model.md, section 20)
+            # added mass grew unstable at 5 ms with it, the default one from 44 m/s (docs/validation.md, "Against the
+            # static wing")
             V, w = np.zeros(3), np.zeros(3)
         else:
             V, w = dyn.rigid_velocity()
@@ -189,7 +192,7 @@ class _StepLoad:
         # section's load at the inflow of V + omega x r_p, held over the step, its change spread by the moment law
         # of Eq. 9), it drives the 3 Hz yaw/twist mode: the held 0.3 m input's yaw-rate oscillation grew from
         # 0.66 to 1.22 rad/s in 0.5 s and the wing folded at 1.5 s; with it here the oscillation decays like the
-        # quasi-static wing's (docs/flight_model.md, section 12)
+        # quasi-static wing's (docs/model.md, "The wing with inertia")
         self.u_ref = V
         self.inflow = self.v_wind - V  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
@@ -214,7 +217,7 @@ class _StepLoad:
             # Newton tangent takes it turned as well (operators; the tip rods' correction of a kept factorisation,
             # tangent_change, their turned share): unturned, the load's tangent was 11 % off along the Newton
             # direction in the 10 m/s collapse (the frame turning at 15 rad/s) and a 5 ms step of the baseline made
-            # 0.08 more Newton iterations (docs/flight_model.md, section 25)
+            # 0.08 more Newton iterations (docs/performance.md, "The damping tangent held over 20 ms")
             self.K0, self.Kb_at, _, Q = held
             self.K0_turn = None if np.array_equal(Q, np.eye(3)) else Q
         self.Kb_turned = self.Kb_at  # the tip rods' share as the force takes it (turned with K0_turn)
@@ -340,7 +343,7 @@ class _StepLoad:
         twist from step to step. A factorisation kept over a few steps (modified Newton) has their axial stiffness
         along the old direction, and the first Newton increment then contracts the residual by 0.02 (median)
         where a fresh tangent gives 1e-3; four fifths of the next residual are this change
-        (docs/flight_model.md, section 23). The rods are cheap to evaluate and sit on 12 nodes."""
+        (docs/performance.md, "Newton's iterations"). The rods are cheap to evaluate and sit on 12 nodes."""
         if snapshot is None:
             return None
         dyn = self.dyn
@@ -379,7 +382,7 @@ class _StepLoad:
         between steps ``u_ref`` follows the wing's rigid translation, whose loads (forces and the moment of Eq. 9, not
         projected) replace the section damping's response to it; :func:`kite_env.turn_rate.tethered_wing_modes`
         linearises that (with ``C`` alone the rig's yaw mode is 2.93 Hz at 15.8 % of critical, with the translation's
-        loads 3.59 Hz at 1.0 %, as the stepped rig; docs/flight_model.md, section 28)."""
+        loads 3.59 Hz at 1.0 %, as the stepped rig; docs/steering.md, "The yaw rig")."""
         dyn, wing = self.dyn, self.dyn.wing
         mesh = wing.mesh
         asm = wing._mono_solvers["prescribed"].asm
@@ -545,7 +548,7 @@ class WingDynamics:
         trailing edge) enters with its share of the fit, not with the whole interpolation weight. Taken from the
         chord line of the LE and TE nodes alone, the TE node's velocity weighs 0.7, and the TE node is driven by its
         own share of the section's lift change: a flutter of the trailing-edge nodes at 20-80 Hz growing at 26 1/s
-        (linearised wing at the start of the baseline flight; docs/flight_model.md, section 12). ``point``
+        (linearised wing at the start of the baseline flight; docs/model.md, "The wing with inertia"). ``point``
         overrides ``aero.rotation_point``. As weights of a force on the section (``f_j = W_j F``) they place its
         resultant at that point, and its power is ``F . v_p``. ``tube_d`` (n_sec,) [m]: the sections' LE tube
         diameters (default: the mesh's, for its ``n_sec`` sections)."""
@@ -677,7 +680,8 @@ class WingDynamics:
         iterate's positions is of the order ``m_a |v_rel| / (c dt)``, as large as the section damping's ``c_v C``
         for a section that turns fast against the flow, and larger in a step made in halves. Left out of the
         Newton tangent, a tumbling mid-wing section's Newton stalled at a residual of 960 N in a step of dt/16 and
-        the flight ended (docs/flight_model.md, section 37). The velocity part is exact (``f_j = W_j F`` with ``F =
+        the flight ended (docs/model.md, "The trailing-edge hem"). The velocity part is exact (``f_j = W_j F`` with ``F
+        =
         -m_a (n' . v_rel) n1`` and ``v_rel = sum_k W_k v_k - v_wind``: ``-df_j/dv_k = m_a W_j W_k n1 n'^T``); the
         position part (the normals' and the weights' change) by central differences of the force, every coordinate of
         every section perturbed in one stacked evaluation (each section's force acts on its own nodes and depends on
@@ -801,7 +805,7 @@ class WingDynamics:
                     # the structural damping's tangent held from up to rayleigh_tangent_period_s before is the
                     # shape's of then: in a fast collapse it no longer describes the wing. The retry, and the
                     # steps in halves after it fails (FlightSimulator.step), assemble it at their own start
-                    # (docs/flight_model.md, section 36)
+                    # (docs/model.md, "Structural damping")
                     self.rayleigh_held = None
                     load = step_load()
         st = res.state
@@ -825,7 +829,8 @@ class WingDynamics:
             # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance;
             # on the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the
             # momentum that a step misses is delivered one step late and the misses do not add up over a flight.
-            # "sections": only what moves the sections as a whole (section_resultant_load; docs section 24)
+            # "sections": only what moves the sections as a whole (section_resultant_load; docs/performance.md, "The
+            # carried residual")
             rho = -res.reactions
             rho[self.solver.auto_fixed] = 0.0
             rho[self.held_dofs] = 0.0

@@ -4,7 +4,8 @@ The paper (Sect. II.C, Table 1) puts the wing's 10 kg into four point masses at 
 leading-edge points. Four points carry the right total mass but not its distribution: the wing's pitch inertia
 about its span is about a tenth of a distributed wing's and its yaw inertia about twice (the four points sit at the
 tips), which sets the frequency of the wing's yaw/twist mode on its bridle and, with it, whether that mode is
-damped (docs/flight_model.md). ``dynamics.wing_point_mass_share`` (default 0.6; 1 = the paper) keeps that share of
+damped (docs/model.md, "The yaw/twist mode"). ``dynamics.wing_point_mass_share`` (default 0.6; 1 = the paper) keeps
+that share of
 the mass as the paper's point masses and spreads the rest over the FE nodes, condensed onto A-D. A point share is
 needed while A-D are explicit particles: the condensed modes put only about 0.04 kg at the trailing-edge points
 B and D along their lines, and the bridle-line dampers (c_c = 251.7 N s/m, Table 1) on such a mass have a decay rate

@@ -320,7 +320,7 @@ class KiteFigureEightEnv(gym.Env):
             try:
                 rec = self.sim.step(self.L_B, self.L_D)
             except SimulationError as exc:
-                if self._failure_raises():  # the wing with inertia: a bug, not an end (issue 20)
+                if self._failure_raises():  # the wing with inertia: a bug, not an end
                     raise NumericalFailure(exc, self.sim.t, self._conditions()) from exc
                 reason, detail = exc.reason, exc.detail
                 break

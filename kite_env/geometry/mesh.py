@@ -48,7 +48,7 @@ def triangle_normals(nodes: np.ndarray, shells: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class KiteMesh:
-    """Unloaded design mesh of an LEI kite in frame K (contract: ``/work/briefs/COMMON.md``).
+    """Unloaded design mesh of an LEI kite in frame K.
 
     Attributes
     ----------

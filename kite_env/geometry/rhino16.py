@@ -1,6 +1,6 @@
 """North Rhino 16 m^2 (the paper's kite), built parametrically from the nominal dimensions of Fig. 3.
 
-No public geometry of this kite exists (physics_facts 3.1). Fig. 3 of Bosch et al. gives six lengths of the FE
+No public geometry of this kite was found. Fig. 3 of Bosch et al. gives six lengths of the FE
 mesh: 5.80, 5.51, 0.634, 2.94, 3.20 and 1.93 m, plus 16 m^2 total area, five struts, and the nominal section angles
 of attack 6.5 deg (both tips) and 12.7 deg (mid-wing) of the unloaded wing (Sect. II.A).
 
@@ -54,12 +54,12 @@ Design laws (eta = fraction of the half LE arc projected on the y_k-z_k plane, 0
   attack at alpha_k is alpha(eta) = 6.5 + (12.7 - 6.5)(1 - eta^2) deg: theta = alpha - atan2(u.n0, u.h).
 * Node chord: truncated ellipse c(eta) = 1.93 sqrt(1 - (eta/eta_e)^2), eta_e such that c(1) = 0.634 m (finite slope
   at the tip). Mid-chord points aligned at x = 0.308 m (unswept mid-chord line, as on the V3 whose rib mid-chords
-  lie within 3 cm of one line, physics_facts 3.4); this sweeps the LE back towards the tips.
+  lie within 3 cm of one line, awegroup/TUDELFT_V3_KITE Surfplan export); this sweeps the LE back towards the tips.
 * LE tube diameter: the V3 distribution versus LE arc fraction, scaled by the length ratio sqrt(16/25) = 0.8
   (centre 0.162 m, tip 0.090 m). Struts: centre + two per side at 1/3 and 2/3 of the half LE arc (equal panels;
   positions not published), diameter at the LE end 0.674 x local LE tube d and at the TE end 0.80 x that (mean
-  ratios of the V3 struts, physics_facts 3.4). Tip rod 10 mm (solid "thin stiff beam"), TE wire 2 mm.
-* Camber kappa = 0.08 per Eq. (6) (middle of the V3 range 0.07-0.09 quoted in the brief; physics_facts 1.5 gives
+  ratios of the V3 struts, awegroup/TUDELFT_V3_KITE). Tip rod 10 mm (solid "thin stiff beam"), TE wire 2 mm.
+* Camber kappa = 0.08 per Eq. (6) (a middle value; the deformed V3's sections in awegroup/Vortex-Step-Method's data span
   0.04-0.095), maximum of the camber line at 1/3 chord.
 """
 

@@ -1,6 +1,6 @@
 """TU Delft V3 LEI kite (25 m^2) from its public Surfplan export.
 
-Data: ``/work/shared/reference/physics_facts.md`` section 3.4, transcribed from awegroup/TUDELFT_V3_KITE
+Data: transcribed from awegroup/TUDELFT_V3_KITE
 ``data/geometry/surfplan_export/V3D_3d.txt`` [S6] (commit e021aa95). Surfplan frame: x spanwise, y up, z chordwise
 with the LE at +z. The 12 half-span ribs (rib 1 = tip, rib 12 = next to the centre) give the canopy LE point (front
 of the LE tube) and the TE point; the LE tube centre line and its diameter come from the same file.
@@ -18,13 +18,14 @@ Construction
 * Section planes are perpendicular to the LE tube centre line (no rib-orientation vectors are transcribed).
 * Struts at ribs 2, 5, 8, 11 and mirrored (Surfplan "Strut 2/5/8/11"; no centre strut); strut tube diameter linear
   between the exported LE-end and TE-end values.
-* Camber kappa = 0.095 per Eq. (6) (VSM's single-value V3 airfoil, physics_facts 1.5 [S3b]); maximum of the camber
+* Camber kappa = 0.095 per Eq. (6) (the single-value V3 airfoil of the Vortex-Step-Method test scripts,
+awegroup/Vortex-Step-Method); maximum of the camber
   line at 1/3 chord (modelling choice, the rib profiles are not transcribed).
 * Tip beam: the V3 has no separate tip rod (its tip is the LE tube itself, d = 0.112 m). The mesh contract models
   the tip as a thin stiff rod; we keep the same 10 mm rod as for the Rhino and flag the difference in ``info``.
-  Trailing-edge wire 2 mm (bridle line diameters are 2-5 mm, physics_facts 4.4).
+  Trailing-edge wire 2 mm (bridle line diameters are 2-5 mm in awegroup/kite_fem's V3 data).
 
-Published global properties for comparison (physics_facts 3.2, [S6] data/properties.yaml): flat area 25 m^2,
+Published global properties for comparison (awegroup/TUDELFT_V3_KITE, data/properties.yaml): flat area 25 m^2,
 projected area 19.753 m^2, flat span 11.18 m, projected span 8.32 m, LE 3-D length 11.302 m, 8 struts.
 This mesh (37 x 6): flat area (sum of strip width x Eq. (5) chord) 25.15 m^2 (+0.6 %); LE node polyline 11.29 m
 (published LE length 11.302 m); projected canopy area 19.15 m^2 (the mesh canopy starts at the tube centre, the
@@ -40,7 +41,8 @@ import numpy as np
 from .lei import LeiDesign, arc_fractions, build_lei_mesh
 from .mesh import KiteMesh
 
-# physics_facts 3.4 [S6] Surfplan ribs, half span: rib, LE (x, y, z), TE (x, y, z) [m]; rib 1 = tip
+# awegroup/TUDELFT_V3_KITE Surfplan export (data/geometry/surfplan_export/V3D_3d.txt): ribs, half span: rib, LE (x, y,
+# z), TE (x, y, z) [m]; rib 1 = tip
 SURFPLAN_RIBS = np.array([
     [1, 4.156287, 0.916618, 0.520832, 4.156287, 0.916618, -0.864107],
     [2, 3.967978, 1.791356, 0.709238, 3.955506, 1.787553, -1.011852],
@@ -56,7 +58,8 @@ SURFPLAN_RIBS = np.array([
     [12, 0.225013, 3.741837, 1.156262, 0.220752, 3.696209, -1.472144],
 ])
 
-# physics_facts 3.4 [S6] LE tube centre line, half span: point, x, y, z, d [m]. Points 9-19 lie at ribs 2-12;
+# awegroup/TUDELFT_V3_KITE Surfplan export: LE tube centre line, half span: point, x, y, z, d [m]. Points 9-19 lie at
+# ribs 2-12;
 # points 1-8 wrap around the tip (rib 1 uses the diameter of point 1).
 SURFPLAN_LE_TUBE = np.array([
     [1, 4.047384, 0.902987, -0.806316, 0.112452],
@@ -73,7 +76,7 @@ SURFPLAN_LE_TUBE = np.array([
     [19, 0.224849, 3.740081, 1.055068, 0.202418],
 ])
 
-# physics_facts 3.4 [S6] Surfplan struts: rib, diameter at the LE end, diameter at the TE end [m]
+# awegroup/TUDELFT_V3_KITE Surfplan export: struts: rib, diameter at the LE end, diameter at the TE end [m]
 SURFPLAN_STRUTS = np.array([
     [2, 0.1057, 0.0789],
     [5, 0.1105, 0.0981],
@@ -81,14 +84,14 @@ SURFPLAN_STRUTS = np.array([
     [11, 0.1408, 0.1060],
 ])
 
-# physics_facts 3.2 [S6] data/properties.yaml
+# awegroup/TUDELFT_V3_KITE, data/properties.yaml
 PUBLISHED = dict(flat_area_m2=25.0, projected_area_m2=19.753, flat_span_m=11.18, projected_span_m=8.32,
                  le_length_m=11.302, flat_max_chord_m=2.63, n_struts=8)
 
-CAMBER = 0.095  # Eq. (6) camber, VSM single-value V3 airfoil (physics_facts 1.5 [S3b])
+CAMBER = 0.095  # Eq. (6) camber, VSM single-value V3 airfoil (Vortex-Step-Method test scripts)
 CAMBER_POS = 1.0 / 3.0  # chord fraction of the maximum camber (modelling choice)
 TIP_ROD_D = 0.010  # [m] thin stiff tip rod of the mesh contract (modelling choice, see module docstring)
-TE_WIRE_D = 0.002  # [m] trailing-edge wire (bridle line range 2-5 mm, physics_facts 4.4)
+TE_WIRE_D = 0.002  # [m] trailing-edge wire (bridle line range 2-5 mm, awegroup/kite_fem V3 data)
 
 
 def _to_design_frame(p_s: np.ndarray) -> np.ndarray:
@@ -119,7 +122,7 @@ def v3_design() -> LeiDesign:
     frac = arc_fractions(le)
     strut_frac = np.array([frac[rib_of_station == r][0] for r in SURFPLAN_STRUTS[:, 0].astype(int)])
     info = dict(
-        source="TU Delft V3 Surfplan export (physics_facts 3.4, [S6] awegroup/TUDELFT_V3_KITE "
+        source="TU Delft V3 Surfplan export (awegroup/TUDELFT_V3_KITE "
                "data/geometry/surfplan_export/V3D_3d.txt)",
         published=PUBLISHED,
         strut_ribs=[int(r) for r in SURFPLAN_STRUTS[:, 0]],

@@ -5,7 +5,7 @@ built from the chord and the mean of the two nodes' section vectors, through the
 singular: the frame when the nodes' section vectors turn onto the chord (``D = q . r2 -> 0``, a hem bent by 90
 deg at both ends in the same sense), the logarithm at a relative rotation of pi. A slack, tumbling canopy turns its
 trailing-edge nodes that far: the frame flips within a step, the element's energy jumps, and the nodes' rotations
-spin up (docs/flight_model.md, section 37). This element has no frame and no logarithm. With the chord direction
+spin up (docs/model.md, "The trailing-edge hem"). This element has no frame and no logarithm. With the chord direction
 ``r = (x2 - x1) / l`` and each node's hem direction ``a_i = R_i e1`` (``e1`` the undeformed axis, ``R_i`` the nodal
 rotation, identity unloaded), its energy is::
 
@@ -22,7 +22,7 @@ b2)`` and ``c = b1 . b2``, ``(1 - c)^2 + s^2`` is ``2 (1 - cos tau)`` for a twis
 ``(th2x - th1x)^2`` for small twists), rises monotonically to a twist of pi and vanishes only where the section
 vectors agree, while a bending of one end against the other enters only at fourth order (``(1 - c)^2 + s^2 = 2 (1 -
 c) - |P (b1 x b2)|^2``). ``s^2`` alone has a second minimum at a twist of pi, where a trailing-edge node flipped by
-half a turn stayed in the 7 m/s flight (stop 43). The torsion's negative stiffness beyond 90 deg is at most its
+half a turn stayed in the 7 m/s flight. The torsion's negative stiffness beyond 90 deg is at most its
 small-angle stiffness ``GJ / L0``, a fraction of a trailing-edge node's rotary inertia ``J / (beta dt^2)`` in a
 step. Without torsion the wing's static start does not converge. Bending is isotropic (the hem's ``EI``, both
 axes).

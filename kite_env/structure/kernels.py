@@ -58,7 +58,7 @@ ENV_VAR = "KITE_ENV_ELEMENT_BACKEND"
 # ``error_model="numpy"`` (as the dynamics' kernels): a division by zero (a degenerate triangle, a beam of zero
 # length in a Newton iterate) gives ``inf``/``nan`` as the NumPy reference does, which the solver reports as a
 # non-finite residual (a failed step, made again in halves), instead of raising ``ZeroDivisionError`` out of the
-# flight (seen with the von Karman canopy folding, docs/flight_model.md, section 29)
+# flight (seen with the von Karman canopy folding, docs/steering.md, "The von Karman membrane")
 _JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 # Thresholds of the reference implementations.  Literals, not imports: numba's cache is keyed on this file only,

@@ -16,7 +16,7 @@ be posed without the kite mesh or the aerodynamics::
     res = m.solve(load_steps=2)
     res.displacements[-1]                                    # ~ (-0.0564, 0, -0.3017): the elastica
 
-Conventions (see /work/briefs/COMMON.md): 6 DOF per node ``[u_x, u_y, u_z, w_x, w_y, w_z]`` in one global frame;
+Conventions: 6 DOF per node ``[u_x, u_y, u_z, w_x, w_y, w_z]`` in one global frame;
 rotations are spatial spins (``R <- expm(dw) R``); SI units. Loads are applied in ``load_steps`` equal increments
 (prescribed displacements too), each step solved to equilibrium by Newton-Raphson.
 

@@ -324,7 +324,7 @@ def membrane_discrete_gradient(x0_e: np.ndarray, x1_e: np.ndarray, G: np.ndarray
     slack switches of the relaxed energy). Averaging the end forces instead (the trapezoidal rule of
     generalized-alpha) does work that differs from the energy change at every switch; for the canopy's gram-sized
     nodes, whose membrane modes are far faster than the step, that error pumps energy into the wing (a free wing in
-    vacuum gained 75 % of its kinetic energy in 0.3 s, docs/flight_model.md, section 15). ``S_alg`` is
+    vacuum gained 75 % of its kinetic energy in 0.3 s, docs/model.md, "Energy"). ``S_alg`` is
     ``S(E_mid) + O(|dE|^2)``: second order. Returns ``f`` (n, 9) [N] (node-major as :func:`membrane_internal`),
     the stored energies ``U0``, ``U1`` (n,) [J] at the two ends and, with ``tangent``, ``K`` (n, 9, 9) [N/m], the
     derivative of ``f`` with respect to ``x1``, ``A0 h (B_mid^T (dS_alg/dE1) B_1 + (G S_alg G^T) (x) I_3 / 2)``

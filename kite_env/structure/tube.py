@@ -3,12 +3,13 @@
 The paper models the LE tube and struts with beam elements whose bending stiffness ``EI(p, d, q)`` depends on the
 inflation pressure ``p``, the tube diameter ``d`` and the deflection ``q`` (Sect. II.A, "correlations derived in
 [9] by fitting to experimental data"). The correlations are those of Breukels' thesis for a 1 m inflated cantilever
-(physics_facts.md section 2, sources [S4] kite_fem and [S5] Billow); the constants C1..C19 are transcribed there.
+(Breukels 2011, as coded in awegroup/kite_fem, src/kite_fem/BeamElement.py, and awegroup/Billow,
+src/billow/elements/inflatable.py); the constants C1..C19 are transcribed below.
 
 Units: Breukels' fits take the gauge pressure in **bar** and the radius ``r = d/2`` in m. Everything outside this
 module is SI: pressures in Pa are converted here and nowhere else.
 
-Moment-curvature reading (Billow's energy-consistent re-interpretation, physics_facts 2.4): a 1 m cantilever with a
+Moment-curvature reading (Billow's energy-consistent re-interpretation, awegroup/Billow): a 1 m cantilever with a
 tip load ``P`` and tip deflection ``v`` has root moment ``M = P L`` and root curvature ``kappa = 3 v / L``. The
 load-deflection law ``P(v) = D (1 - exp(-(N/D) v))`` therefore becomes::
 
@@ -21,11 +22,11 @@ curvature of the cubic element the law is evaluated at is ``structure.tube_curva
 the element's root-mean-square curvature makes the secant law the gradient of the stored energy
 ``L0 (W(kappa) + W_t(phi))`` (:func:`bending_energy_density`, :func:`torsion_energy_density`), so the tubes are
 elastic and their tangent (:func:`secant_material_terms`) is exact; the default, the larger end curvature, is not
-a gradient (docs/flight_model.md, section 15). Collapse (local wrinkling through the tube) is flagged when the
+a gradient (docs/model.md, "Energy"). Collapse (local wrinkling through the tube) is flagged when the
 equivalent cantilever deflection ``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the
 post-collapse state. Beyond it the law is a hinge of constant moment ``M_max``, and nothing in it stops a fold: the
 fold contact of :func:`fold_contact` (``structure.tube_fold_onset_deg``) closes a kinked element's fold at pi, where
-its legs meet (docs/flight_model.md, section 18).
+its legs meet (docs/model.md, "Section frame, fold contact, rotary inertia").
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ import numpy as np
 
 PA_PER_BAR = 1.0e5
 
-# Breukels' inflated-beam constants (physics_facts.md 2.1-2.3) [S4, S5]
+# Breukels' inflated-beam constants (Breukels 2011; awegroup/kite_fem BeamElement.py, awegroup/Billow inflatable.py)
 C1, C2, C3, C4 = 6582.82, -272.43, 40852.38, 14.31
 C5, C6, C7, C8 = 271865251.42, 215.93, 14021.79, -589.05
 C9, C10, C11, C12 = 322.55, 0.0239, 5.3833, 0.0461
@@ -85,7 +86,8 @@ def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray, ele
     rms curvature times its length) and closes the fold at pi; without them Breukels' law alone.
 
     Raises ``ValueError`` where the fit gives a non-physical (non-positive) stiffness or strength: Breukels' fits
-    degrade for small tubes (C2, C8 < 0; physics_facts 2.4), and silently clipping would hide that.
+    degrade for small tubes (C2, C8 < 0; the fits are calibrated on 1 m tubes of 0.1-0.3 m diameter), and silently
+    clipping would hide that.
     """
     p = np.asarray(pressure_pa, dtype=float) / PA_PER_BAR  # Breukels' fits use bar
     d = np.asarray(diameter_m, dtype=float)
@@ -210,7 +212,7 @@ def element_curvature(theta1: np.ndarray, theta2: np.ndarray, L0: np.ndarray, me
       the secant law ``M(kappa)/kappa`` times the linear element's moments: the tube forces are conservative
       (a hyperelastic law is the gradient of its stored energy: Holzapfel, Nonlinear Solid Mechanics, Wiley 2000,
       ch. 6).
-    * ``"max_end"``: the larger magnitude of the two end curvatures (the choice of stops before 27). It is not a
+    * ``"max_end"``: the larger magnitude of the two end curvatures (the former default). It is not a
       function of the element's energy, so ``EI(kappa) K theta`` is not a gradient: on a closed path of the
       element's rotations its forces do net work (a free wing gained kinetic energy from nothing).
     """
