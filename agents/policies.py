@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 #: folder of the shipped trained models, one sub-folder per name (``<name>/model.zip``)
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 #: names of the shipped models (``kite-eval --policy ppo``)

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import yaml
 
@@ -366,13 +367,15 @@ _POSITIVE = {
 _UNBOUNDED_OK = {"env.start_curvature_max"}
 # values that must be >= 0
 _NON_NEGATIVE = {
-    "structure.added_mass_factor", "structure.rayleigh_beta_s", "structure.rayleigh_tangent_period_s", "sim.initial_speed_per_wind", "sim.initial_speed_mps",
+    "structure.added_mass_factor", "structure.rayleigh_beta_s", "structure.rayleigh_tangent_period_s",
+    "sim.initial_speed_per_wind", "sim.initial_speed_mps",
     "structure.rotary_inertia_factor",
     "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max",
     "fsi.max_retries", "dynamics.max_substep_halvings", "dynamics.beta_ac", "dynamics.beta_bd", "dynamics.beta_diag",
     "dynamics.line_cd",
     "dynamics.line_damping_Ns_per_m", "dynamics.tether_diameter_m", "dynamics.gravity_mps2", "control.k1_m_per_rad",
-    "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.line_speed_max_mps", "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
+    "control.k3_m", "control.k3i_per_s", "control.force_integral_max_m", "control.line_speed_max_mps",
+    "control.mu_target", "control.beta_min", "sim.warmup_s", "env.w_tracking",
     "env.w_traction", "env.w_action_rate", "env.crash_penalty", "env.slack_tether_N", "env.wind_speed_min_mps",
     "env.wind_speed_max_mps", "env.turbulence_intensity_min", "env.turbulence_intensity_max",
 }
@@ -446,8 +449,8 @@ def _parse_scalar(text: str) -> Any:
 RANDOMISED = {
     "wind.speed_mps": ("env.wind_speed_min_mps", "env.wind_speed_max_mps"),
     "wind.turbulence_intensity": ("env.turbulence_intensity_min", "env.turbulence_intensity_max"),
-    "sim.initial_speed_mps": ("env.initial_speed_min_mps", "env.initial_speed_max_mps", "env.initial_speed_per_wind_min",
-                              "env.initial_speed_per_wind_max"),
+    "sim.initial_speed_mps": ("env.initial_speed_min_mps", "env.initial_speed_max_mps",
+                              "env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max"),
     "sim.initial_speed_per_wind": ("env.initial_speed_per_wind_min", "env.initial_speed_per_wind_max"),
 }
 
@@ -583,7 +586,8 @@ def _validate(cfg: Config) -> None:
         raise ConfigError(f"config key 'env.observation' must list distinct terms of {', '.join(OBSERVATION_TERMS)} "
                           f"separated by commas, got {env.observation!r}")
     if env.max_episode_s < cfg.control.control_dt_s:
-        raise ConfigError(f"config key 'env.max_episode_s' must be at least control.control_dt_s, got {env.max_episode_s}")
+        raise ConfigError(f"config key 'env.max_episode_s' must be at least control.control_dt_s, "
+                          f"got {env.max_episode_s}")
 
 
 def parse_overrides(overrides: Iterable[str]) -> dict[str, dict[str, Any]]:

@@ -36,7 +36,6 @@ import numpy as np
 
 from kite_env.config import ControlConfig
 
-
 # Below this tension of the power lines (F_cA + F_cC) the force ratio of Eq. 18 is not defined (an unloaded wing,
 # slack bridle lines: 0/0); the force loop then holds (error 0) instead of acting on a ratio of two noise levels.
 # Without it, a luffing wing whose power lines carry 1e-9 N while a steering line carries 1 N gave mu = 1e9 and

@@ -55,8 +55,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -161,10 +161,10 @@ def is_crash(termination_reason: str | None) -> bool:
 
 def evaluation_config(cfg: Config, duration_s: float | None = None, randomize: bool = False) -> Config:
     """``cfg`` with the environment set up for an evaluation at the configured conditions: the wind section as it
-    is (no randomisation), the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``), episodes of ``duration_s``
-    (default ``sim.duration_s``). ``randomize``: draw wind and start from the ``env`` ranges instead. The
-    training-only start rule ``sim.surrogate_start: table_only`` (a trained model's config) becomes ``table``: an
-    evaluation starts every episode it draws, as the full model does."""
+    is (no randomisation), the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or
+    ``sim.initial_speed_per_wind``), episodes of ``duration_s`` (default ``sim.duration_s``). ``randomize``: draw wind
+    and start from the ``env`` ranges instead. The training-only start rule ``sim.surrogate_start: table_only`` (a
+    trained model's config) becomes ``table``: an evaluation starts every episode it draws, as the full model does."""
     duration = cfg.sim.duration_s if duration_s is None else float(duration_s)
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
@@ -179,7 +179,8 @@ def run_episode(env, agent, seed: int | None = None, options: dict | None = None
     """Fly one episode of ``env`` (a :class:`~kite_env.envs.figure_eight.KiteFigureEightEnv`, unwrapped) with
     ``agent`` (SB3 ``predict`` interface). Returns ``(log, info)``: the :class:`FlightLog` (None without
     ``record``) and a dict with ``episode_return``, ``episode_steps``, ``termination_reason`` and the reward terms
-    summed over the episode, and the episode's draws (``env.episode_info``). ``progress(t)`` is called after every control step."""
+    summed over the episode, and the episode's draws (``env.episode_info``). ``progress(t)`` is called after every
+    control step."""
     env.recorder = FlightRecorder(env.cfg, env.path) if record else None
     obs, _ = env.reset(seed=seed, options=options)
     if seed is not None and hasattr(agent, "seed_episode"):

@@ -25,7 +25,8 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
 
 
-def kite_frame(pos_a: np.ndarray, pos_b: np.ndarray, pos_c: np.ndarray, pos_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def kite_frame(pos_a: np.ndarray, pos_b: np.ndarray, pos_c: np.ndarray,
+               pos_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Origin and orientation of frame K from the bridle points A, B, C, D (each ``(..., 3)`` in any frame F).
 
     Returns ``origin (..., 3)`` and ``R (..., 3, 3)`` whose columns are ``x_k, y_k, z_k`` expressed in F.

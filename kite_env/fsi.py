@@ -30,8 +30,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kite_env.aero.loads import (LUFFING_BAND_CL, load_jacobian, oswald_efficiency, projected_planform,
-                                 section_damping, section_loads, wing_totals)
+from kite_env.aero.loads import (
+    LUFFING_BAND_CL,
+    load_jacobian,
+    oswald_efficiency,
+    projected_planform,
+    section_damping,
+    section_loads,
+    wing_totals,
+)
 from kite_env.config import Config
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP, KiteMesh
 from kite_env.structure import rotations, tube
@@ -71,7 +78,7 @@ class FlightState:
     v_wind: np.ndarray
 
     @classmethod
-    def wind_tunnel(cls, airspeed_mps: float, alpha_rad: float, sideslip_rad: float = 0.0) -> "FlightState":
+    def wind_tunnel(cls, airspeed_mps: float, alpha_rad: float, sideslip_rad: float = 0.0) -> FlightState:
         """Kite at rest in a uniform flow of ``airspeed_mps`` at kite angle of attack ``alpha_rad``.
 
         The kite angle of attack is the angle between the inflow (air relative to the kite) and ``x_k`` in the
@@ -170,7 +177,8 @@ class AeroelasticWing:
         self._tube_props_fold = self.tube_props
         if s.tube_fold_onset_deg > 0.0:
             self._tube_props_fold = tube.tube_properties(s.tube_pressure_Pa, d[self._is_tube],
-                                                         self.beams.L0[self._is_tube], np.deg2rad(s.tube_fold_onset_deg))
+                                                         self.beams.L0[self._is_tube],
+                                                         np.deg2rad(s.tube_fold_onset_deg))
         self.shells = ShellSet(mesh.shells, mesh.nodes, s.canopy_E_Pa, s.canopy_nu, s.canopy_thickness_m,
                                wrinkling=s.wrinkling, shear_ratio=s.canopy_shear_ratio,
                                kinematics=s.membrane_kinematics)
@@ -418,7 +426,7 @@ class AeroelasticWing:
         V = float(np.linalg.norm(flight.v_kite - flight.v_wind))
         return dataclasses.replace(flight, v_wind=flight.v_wind - alpha_i * V * e_L)
 
-    def _update_downwash(self, sol: "WingSolution", flight: FlightState, dt: float | None = None) -> float:
+    def _update_downwash(self, sol: WingSolution, flight: FlightState, dt: float | None = None) -> float:
         """Induced angle and lift direction from a solution at the free ``flight``; returns the change of the angle.
 
         In a time step (``dt``) the induced angle follows its quasi-steady value with a first-order lag of time
@@ -460,7 +468,8 @@ class AeroelasticWing:
         x = state.x[sec]
         loads = section_loads(
             x, self.mesh.section_tube_d, self.mesh.section_width, flight.v_kite, flight.omega, flight.v_wind,
-            self.cfg.aero.rho_kg_m3, x_sec_prev=self._sec_prev if self._eq3(dt) else None, dt=dt if self._eq3(dt) else None,
+            self.cfg.aero.rho_kg_m3, x_sec_prev=self._sec_prev if self._eq3(dt) else None,
+            dt=dt if self._eq3(dt) else None,
             **self._aero_options())
         if dt and self._C_damp is not None:
             m = sec.shape[1]
@@ -540,7 +549,7 @@ class AeroelasticWing:
                 first = first or exc
                 if restart == restarts:  # the first failure (its message and cause), with every path's history
                     first.history = history
-                    raise first
+                    raise first  # noqa: B904 (the first failure itself, its own cause and traceback kept)
                 n = len(ramp) * 2
                 ramp = list(np.arange(1, n + 1) / n)
                 # from the unloaded wing, forgetting what the failed path left in it (reset()); the committed state,
@@ -654,7 +663,7 @@ class AeroelasticWing:
             # first guess of the line tensions: the aerodynamic force shared by the four lines
             f0 = load.force(state).reshape(-1, 6)[:, :3].sum(axis=0)
             self.lines.tension[:] = max(float(np.linalg.norm(f0)) / 4.0, 1.0)
-        for outer in range(1, n_outer + 1):
+        for _outer in range(1, n_outer + 1):
             try:
                 if self._damped:
                     res = solver.solve_damped(state, fixed, du_fixed, load, fcfg.tol_force_rel, fcfg.tol_disp_m,
@@ -841,7 +850,7 @@ class _AeroLoad:
     assembler's pattern.
     """
 
-    def __init__(self, wing: "AeroelasticWing", asm: Assembler, flight: FlightState, dt: float | None,
+    def __init__(self, wing: AeroelasticWing, asm: Assembler, flight: FlightState, dt: float | None,
                  scale: float):
         self.wing, self.asm, self.flight, self.dt, self.scale = wing, asm, flight, dt, scale
         self.f_ext = None

@@ -190,7 +190,7 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
         e /= np.linalg.norm(e)
         dp = 6 * node + np.arange(3)
 
-        def mode(KK):
+        def mode(KK, dp=dp, e=e):
             u = np.zeros(n_dof)
             u[dp] = e
             u[free] = -np.linalg.solve(KK[np.ix_(free, free)], KK[np.ix_(free, dp)] @ e)

@@ -30,8 +30,13 @@ def main(argv=None) -> int:
     if not (args.duration > 0 and all(d > 0 for d in dts)):
         print("bench_flight: error: --duration and --dt-ms must be positive", file=sys.stderr)
         return 2
-    from kite_env.benchmark import (PAPER_REAL_TIME_FACTOR, bench_flight, format_flight_table, pin_to_one_core,
-                                    write_json)
+    from kite_env.benchmark import (
+        PAPER_REAL_TIME_FACTOR,
+        bench_flight,
+        format_flight_table,
+        pin_to_one_core,
+        write_json,
+    )
 
     pin_to_one_core()
 

@@ -32,10 +32,10 @@ import numpy as np
 
 
 def _setup(overrides):
+    from agents.baseline import BaselinePolicy
     from kite_env.config import load_config
     from kite_env.control import LineActuator
     from kite_env.dynamics.simulator import FlightSimulator
-    from agents.baseline import BaselinePolicy
     from kite_env.trajectory import Lemniscate
     from kite_env.wind import WindField
 
@@ -60,7 +60,8 @@ def _fly_to(t_end, overrides):
             L_B, L_D, _ = act.rest_lengths(dl_star, rec.line_length, rec.line_tension)
         rec = sim.step(L_B, L_D)
         k += 1
-    print(f"at t = {rec.t:.3f} s: L_B - L_D = {L_B - L_D:.3f} m, right-tip alpha {math.degrees(rec.wing.alpha[0]):.2f} deg")
+    print(f"at t = {rec.t:.3f} s: L_B - L_D = {L_B - L_D:.3f} m, "
+          f"right-tip alpha {math.degrees(rec.wing.alpha[0]):.2f} deg")
     return cfg, sim, L_B, L_D
 
 
@@ -122,7 +123,8 @@ def branch(args):
         a = np.asarray(a)
         quarters = np.array_split(a, 4) if a.size >= 8 else [a]
         p2p = " ".join(f"{q.max() - q.min():.1f}" for q in quarters if q.size)
-        print(f"{name:16s} {end:18s} right-tip alpha {a.min():6.1f}..{a.max():5.1f} deg, peak-to-peak per quarter {p2p}")
+        print(f"{name:16s} {end:18s} right-tip alpha {a.min():6.1f}..{a.max():5.1f} deg, "
+              f"peak-to-peak per quarter {p2p}")
 
 
 def eig(args):
@@ -175,8 +177,8 @@ def openloop(args):
 
 def _fly_modified(args, modify):
     from kite_env import flight
-    from kite_env.dynamics import simulator as S
     from kite_env.config import load_config
+    from kite_env.dynamics import simulator as S
 
     orig = S.FlightSimulator.reset
 

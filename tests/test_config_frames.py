@@ -55,7 +55,8 @@ def test_overrides_and_errors(tmp_path):
     with pytest.raises(ConfigError, match="membrane_kinematics"):
         load_config(overrides=["structure.membrane_kinematics=foppl"])
     with pytest.raises(ConfigError, match="green_lagrange"):
-        load_config(overrides=["structure.membrane_kinematics=von_karman", "structure.membrane_forces=energy_consistent"])
+        load_config(overrides=["structure.membrane_kinematics=von_karman",
+                               "structure.membrane_forces=energy_consistent"])
 
 
 def test_kite_frame_orthonormal_right_handed_and_definition():

@@ -1,8 +1,9 @@
 """Static aeroelastic wing (Fig. 2, Eq. 1-9): convergence, force balance, nominal state, steering twist.
 
 One cold solve of the rhino16 wing at 25 m/s is shared by the tests (module fixture). The kite angle of attack
-10 deg (inflow against x_k, frame K from the tip bridle points; C_M about the nose) puts the loaded mid-wing sections near the paper's
-in-flight value; in flight it is set by the bridle geometry (flight-dynamics issue), here it is an input.
+10 deg (inflow against x_k, frame K from the tip bridle points; C_M about the nose) puts the loaded mid-wing sections
+near the paper's in-flight value; in flight it is set by the bridle geometry (flight-dynamics issue), here it is an
+input.
 """
 
 import dataclasses

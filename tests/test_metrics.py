@@ -11,8 +11,15 @@ import pytest
 
 from kite_env.config import load_config
 from kite_env.flight import FlightLog
-from kite_env.metrics import (MIN_FIT_SAMPLES, compute_metrics, heading_rate, heading_rate_mean, read_timeseries,
-                              write_timeseries, yaw_steering_fit)
+from kite_env.metrics import (
+    MIN_FIT_SAMPLES,
+    compute_metrics,
+    heading_rate,
+    heading_rate_mean,
+    read_timeseries,
+    write_timeseries,
+    yaw_steering_fit,
+)
 
 DT = 0.01  # [s]
 N_SEC = 5

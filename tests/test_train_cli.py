@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+
 from kite_env.cli import train as train_cli
 
 AGENT_CONFIGS = sorted((Path(__file__).parents[1] / "agents" / "recipes").glob("*.yaml"))

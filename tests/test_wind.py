@@ -54,7 +54,7 @@ def test_power_profile_against_hand_formula():
 def test_spectra_are_normalised_von_karman():
     length = 80.0
     for comp in (0, 1):
-        total = quad(lambda k: von_karman_spectra(np.array([k]), length)[comp][0], 0.0, np.inf, limit=200)[0]
+        total = quad(lambda k, comp=comp: von_karman_spectra(np.array([k]), length)[comp][0], 0.0, np.inf, limit=200)[0]
         assert total == pytest.approx(1.0, abs=1e-4)
     f_u, f_t = von_karman_spectra(np.array([0.0]), length)
     # integral length scale L = pi F_u(0) / (2 sigma^2); transverse scale is half of it (isotropy)

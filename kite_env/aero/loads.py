@@ -50,10 +50,8 @@ import numpy as np
 
 from kite_env.aero.breukels import CM_REGRESSION_REF_DEFAULT, X_REF_OVER_C_DEFAULT, lei_coefficients
 from kite_env.aero.kernels import section_loads_fields
-from kite_env.aero.sections import (SectionGeometry, apparent_wind, cross, inflow, section_geometry,
-                                    spanwise_directions)
+from kite_env.aero.sections import SectionGeometry, apparent_wind, cross, inflow, section_geometry, spanwise_directions
 from kite_env.structure.kernels import resolve_backend
-
 
 
 @dataclass(frozen=True)
@@ -328,8 +326,9 @@ def load_jacobian(
     xs = np.broadcast_to(x_sec, (p, n_sec, m, 3)).copy()
     q = np.arange(p)
     xs.reshape(p, n_sec, p)[q, :, q] += h
-    rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (p,) + np.shape(a)).reshape(
-        (p * n_sec,) + np.shape(a)[1:]))
+    def rep(a):
+        return np.broadcast_to(np.asarray(a, dtype=float), (p,) + np.shape(a)).reshape((p * n_sec,) + np.shape(a)[1:])
+
     v_w = np.asarray(v_wind, dtype=float)
     pert = section_loads(
         xs.reshape(p * n_sec, m, 3), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
@@ -423,8 +422,9 @@ def section_damping(
     v_w = np.broadcast_to(np.asarray(v_wind, dtype=float), (n_sec, 3))
     du = np.concatenate((np.eye(3), -np.eye(3))) * h  # (6, 3): +h e_k, -h e_k
     wind = (v_w[None, :, :] - du[:, None, :]).reshape(6 * n_sec, 3)
-    rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (6,) + np.shape(a)).reshape(
-        (6 * n_sec,) + np.shape(a)[1:]))
+    def rep(a):
+        return np.broadcast_to(np.asarray(a, dtype=float), (6,) + np.shape(a)).reshape((6 * n_sec,) + np.shape(a)[1:])
+
     loads = section_loads(rep(x_sec), rep(np.broadcast_to(tube_d, (n_sec,))), rep(np.broadcast_to(width, (n_sec,))),
                           v_kite, omega, wind, rho, spanwise=rep(spanwise_directions(x_sec[:, 0])), **options)
     F = loads.nodal_forces.sum(axis=1).reshape(6, n_sec, 3)

@@ -12,13 +12,14 @@ Section frame (Fig. 4; frame definitions in COMMON brief / :mod:`kite_env.frames
     offset of the section nodes from the chord line, oriented like the LE line towards the right tip. Where the
     section is nearly flat (mean offset below 2 % of the chord, the plane is then undefined) ``e_y`` blends smoothly
     into the spanwise tangent of the LE line (central differences of the neighbouring LE nodes, one-sided at the
-    tips), orthogonalised against ``e_x``. So it does where that plane is far from the section's, its normal more than 30 deg
-    from the LE tangent (fully at 60 deg): a mean offset along the span, as of the nodes of a slack, wrinkled
+    tips), orthogonalised against ``e_x``. So it does where that plane is far from the section's, its normal more than
+    30 deg from the LE tangent (fully at 60 deg): a mean offset along the span, as of the nodes of a slack, wrinkled
     canopy, spans no airfoil plane, and the orientation of its normal flips where it crosses 90 deg, which without
     this blend made ``e_y`` and the angle of attack jump (by 12 deg in a sideways-bent section: Newton then cycled
     between the two sides of the jump; docs/model.md, "Section frame, fold contact, rotary inertia"). The LE tangent
-    alone would be wrong at the strongly curved tips of a
-    C-shaped wing, where the section planes are not perpendicular to the LE line (12 deg on the rhino16 tips).
+    alone would be wrong at the
+    strongly curved tips of a C-shaped wing, where the section planes are not perpendicular to the LE line (12 deg on
+    the rhino16 tips).
 
 Our reading of the partly garbled equations of Sect. II.B (fragments of the extracted seed text in brackets):
 
@@ -226,7 +227,7 @@ def apparent_wind(
     v_wind: np.ndarray,
     x_sec_prev: np.ndarray | None = None,
     dt: float | None = None,
-    geometry: "SectionGeometry | None" = None,
+    geometry: SectionGeometry | None = None,
     rotation_point_over_c: float | None = None,
 ) -> np.ndarray:
     """Apparent wind velocity of every section, Eq. (2) with the deformation velocity of Eq. (3).

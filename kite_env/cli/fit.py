@@ -65,8 +65,15 @@ def _fit(args) -> int:
 
     from kite_env.config import fingerprint, load_config
     from kite_env.polar import nominal_wing
-    from kite_env.surrogate.fit import (FILTERED, TAUS, FitData, build_dataset, corrective_samples, fit_mlp,
-                                        reference_stiffness)
+    from kite_env.surrogate.fit import (
+        FILTERED,
+        TAUS,
+        FitData,
+        build_dataset,
+        corrective_samples,
+        fit_mlp,
+        reference_stiffness,
+    )
     from kite_env.surrogate.model import SurrogateWing
     from kite_env.surrogate.samples import git_commit
     from kite_env.surrogate.trajectories import load_tape

@@ -359,7 +359,8 @@ def train(args) -> Path:
         raise UsageError(f"output folder '{out}' is not empty (use --resume to continue it or --force to overwrite)")
     if args.resume:  # the run goes on in the model it was trained on
         check_model(_read_json(out / "model.json"), cfg, f"run '{out}'")
-    if cfg.sim.fidelity == "surrogate":  # the reduced-order wing must be this model's (one clear error, nothing written)
+    # the reduced-order wing must be this model's (one clear error, nothing written)
+    if cfg.sim.fidelity == "surrogate":
         from kite_env.surrogate import surrogate_for
 
         surrogate_for(cfg)

@@ -486,8 +486,9 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
 @njit(**_JIT)
 def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
     """Line ``i`` from the KCU at ``r_k`` (velocity ``v_k``) to the wing end ``x_b[i]`` (velocity ``v_b[i]``):
-    unit vector ``e0, e1, e2`` (KCU -> wing), length ``l``, the spring-damper force ``s`` of Eq. (10), ``root =
-    sqrt(s^2 + eps2)`` and the smoothed pull-only tension ``T`` (:func:`kite_env.dynamics.wing_dynamics.line_tension`)."""
+    unit vector ``e0, e1, e2`` (KCU -> wing), length ``l``, the spring-damper force ``s`` of Eq. (10),
+    ``root = sqrt(s^2 + eps2)`` and the smoothed pull-only tension ``T``
+    (:func:`kite_env.dynamics.wing_dynamics.line_tension`)."""
     a0, a1, a2 = x_b[i, 0] - r_k[0], x_b[i, 1] - r_k[1], x_b[i, 2] - r_k[2]
     l = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     e0, e1, e2 = a0 / l, a1 / l, a2 / l

@@ -44,7 +44,7 @@ class ParticleState:
     r: np.ndarray
     v: np.ndarray
 
-    def copy(self) -> "ParticleState":
+    def copy(self) -> ParticleState:
         return ParticleState(self.r.copy(), self.v.copy())
 
 

@@ -3,7 +3,8 @@
 One time step ``dt`` (``dynamics.dt_s``):
 
 1. frame K, its origin velocity ``v_k`` and rotation rate ``omega_k`` from A-D
-   (:func:`kite_env.frames.kite_frame_rates`); the wing state X = (v_k, omega_k, v_w) and the bridle-point positions ``q_b`` in K;
+   (:func:`kite_env.frames.kite_frame_rates`); the wing state X = (v_k, omega_k, v_w) and the bridle-point
+   positions ``q_b`` in K;
 2. the static aeroelastic wing at ``q_b`` and X (:class:`kite_env.fsi.AeroelasticWing`), warm-started from the last
    step, with the deformation velocity of Eq. (3) over ``dt``; it returns ``F_b``, and ``F_k = -F_b`` acts on A-D;
 3. the particle system (:mod:`kite_env.dynamics.particles`) advanced by one classical Runge-Kutta step (RK4). The
@@ -24,7 +25,7 @@ import numpy as np
 
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations, project_constraints, reel_out_speed
-from kite_env.dynamics.particles import A, B, C, D, DAMPED_PAIRS, KCU, ParticleState, ParticleSystem
+from kite_env.dynamics.particles import DAMPED_PAIRS, A, B, C, D, ParticleState, ParticleSystem
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
@@ -246,7 +247,7 @@ class FlightSimulator:
 
             last = []
 
-            def solve_at(state, lam):
+            def solve_at(state, lam, last=last):
                 last[:] = [wing.solve(None, at(lam), support="lines", warm=True)]
                 return wing.state
 

@@ -700,8 +700,10 @@ class WingDynamics:
         q = np.arange(p)
         xs.reshape(2, p, n_sec, p)[0, q, :, q] += h
         xs.reshape(2, p, n_sec, p)[1, q, :, q] -= h
-        rep = (lambda a: np.broadcast_to(np.asarray(a, dtype=float), (2 * p,) + np.shape(a)).reshape(
-            (2 * p * n_sec,) + np.shape(a)[1:]))
+        def rep(a):
+            return np.broadcast_to(np.asarray(a, dtype=float), (2 * p,) + np.shape(a)).reshape(
+                (2 * p * n_sec,) + np.shape(a)[1:])
+
         held_rep = (rep(n0), rep(m_a), dt)
         f = self._normal_rate_section_forces(
             held_rep, xs.reshape(-1, m, 3), rep(v[sec]), v_wind, rep(mesh.section_tube_d), rep(mesh.section_width),

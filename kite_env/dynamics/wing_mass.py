@@ -23,8 +23,8 @@ taken stress-free in its loaded start shape, and the kinetic energy of the nodal
 "Reduction of stiffness and mass matrices", AIAA J. 3(2), 380). A rigid motion of A-D moves every node rigidly (the
 static modes contain the rigid-body modes), so ``M`` carries the wing's exact mass, centre of mass and inertia tensor
 for rigid motions, and the modal masses of the wing's deformation for the relative motion of A-D. It is held constant
-in K over the flight (the shape changes little after the start), and the velocity-dependent inertia terms of the moving frame are
-not added (their size is ``m omega^2 r``, about 30 N at 1 rad/s, under 1 % of the wing's load).
+in K over the flight (the shape changes little after the start), and the velocity-dependent inertia terms of the moving
+frame are not added (their size is ``m omega^2 r``, about 30 N at 1 rad/s, under 1 % of the wing's load).
 """
 
 from __future__ import annotations

@@ -144,7 +144,8 @@ class KiteFigureEightEnv(gym.Env):
     Wind speed, turbulence intensity and turbulence realisation are drawn from ``self.np_random`` (ranges in the
     ``env`` section). A quantity given without its range (``overrides=["wind.speed_mps=8"]``) is flown at that value:
     its range is pinned to it (:data:`kite_env.config.RANDOMISED`). With ``env.randomize = false`` nothing is drawn: the
-    ``wind`` section as configured, the start at the crossing at ``Config.start_speed_mps`` (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``) (``kite-eval``).
+    ``wind`` section as configured, the start at the crossing at ``Config.start_speed_mps``
+    (``sim.initial_speed_mps`` or ``sim.initial_speed_per_wind``) (``kite-eval``).
     ``reset(options={"wind_seed": n})`` fixes the turbulence realisation.
 
     ## Episode End

@@ -122,13 +122,13 @@ class BeamSet:
         d = X0[self.conn[:, 1]] - X0[self.conn[:, 0]]
         self.L0 = np.linalg.norm(d, axis=1)
         if np.any(self.L0 <= 0.0):
-            raise ValueError("BeamSet: zero-length beam(s) at rows %s" % np.flatnonzero(self.L0 <= 0.0)[:10])
+            raise ValueError(f"BeamSet: zero-length beam(s) at rows {np.flatnonzero(self.L0 <= 0.0)[:10]}")
         e1 = d / self.L0[:, None]
         up = np.broadcast_to(np.asarray(up, dtype=float), (n_e, 3))
         e2 = up - np.einsum("ni,ni->n", up, e1)[:, None] * e1
         n2 = np.linalg.norm(e2, axis=1)
         if np.any(n2 < 1e-8 * np.maximum(np.linalg.norm(up, axis=1), 1e-300)):
-            raise ValueError("BeamSet: `up` is parallel to the beam axis for rows %s" % np.flatnonzero(n2 < 1e-8)[:10])
+            raise ValueError(f"BeamSet: `up` is parallel to the beam axis for rows {np.flatnonzero(n2 < 1e-8)[:10]}")
         e2 /= n2[:, None]
         e3 = np.cross(e1, e2)
         self.R0 = np.stack([e1, e2, e3], axis=-1)  # (n_e, 3, 3), columns e1, e2, e3

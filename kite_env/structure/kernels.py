@@ -264,16 +264,18 @@ def tube_secants(th, L0, rows, EI0, M_max, kappa_collapse, GJ0, c2, kappa_fold, 
     """Breukels' secant tube stiffnesses from the local end rotations (``AeroelasticWing._update_tube_stiffness``).
 
     th : (n_beams, 2, 3) float [rad], L0 : (n_beams,) float [m]   local end rotations (:func:`beam_local_rotations`)
-    and the lengths the curvatures are per (unloaded for ``energy``, the current chord for the larger-end law); rows : (n_tube,) int   the tube beams; EI0, M_max, kappa_collapse, GJ0, c2, kappa_fold,
+    and the lengths the curvatures are per (unloaded for ``energy``, the current chord for the larger-end law);
+    rows : (n_tube,) int   the tube beams; EI0, M_max, kappa_collapse, GJ0, c2, kappa_fold,
     kappa_closed : (n_tube,) float   :class:`kite_env.structure.tube.TubeProperties` (the fold contact of
-    :func:`kite_env.structure.tube.fold_contact` where ``kappa_fold`` is finite); energy : bool   the curvature measure, True: the
-    element's root-mean-square curvature ``sqrt(4 (th1^2 + th1 th2 + th2^2)) / L0`` over both bending components
-    (the secant law is then the gradient of an energy), False: the larger end curvature of the cubic element,
-    ``|-(4 th1 + 2 th2)| / L0`` and ``|(2 th1 + 4 th2)| / L0``. Outputs (n_tube,): secant ``EI = M(kappa) / kappa``
-    [N m^2], secant ``GJ = T(phi) / phi`` with the twist per length ``phi = |th2_x - th1_x| / L0`` (tube.secant_EI,
-    tube.secant_GJ) and the collapse flag ``kappa > kappa_collapse``; with ``energy`` and ``with_tangent`` the
-    material tangent terms ``gb_out``, ``gt_out`` (tube.secant_material_terms; else 0: ``max_end`` has no consistent
-    tangent, and a stiffness held over a Newton solve is a linear law there).
+    :func:`kite_env.structure.tube.fold_contact` where ``kappa_fold`` is finite); energy : bool   the curvature
+    measure, True: the element's root-mean-square curvature ``sqrt(4 (th1^2 + th1 th2 + th2^2)) / L0`` over both
+    bending components (the secant law is then the gradient of an energy), False: the larger end curvature of the
+    cubic element, ``|-(4 th1 + 2 th2)| / L0`` and ``|(2 th1 + 4 th2)| / L0``. Outputs (n_tube,): secant
+    ``EI = M(kappa) / kappa`` [N m^2], secant ``GJ = T(phi) / phi`` with the twist per length
+    ``phi = |th2_x - th1_x| / L0`` (tube.secant_EI, tube.secant_GJ) and the collapse flag ``kappa > kappa_collapse``;
+    with ``energy`` and ``with_tangent`` the material tangent terms ``gb_out``, ``gt_out``
+    (tube.secant_material_terms; else 0: ``max_end`` has no consistent tangent, and a stiffness held over a Newton
+    solve is a linear law there).
     """
     for k in range(rows.shape[0]):
         e = rows[k]

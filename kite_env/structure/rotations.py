@@ -69,13 +69,17 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
     q = np.empty((R.shape[0], 4))
     # case w largest
     s = np.sqrt(np.maximum(1.0 + tr, 1e-300)) * 2.0
-    q0 = np.stack([0.25 * s, (R[:, 2, 1] - R[:, 1, 2]) / s, (R[:, 0, 2] - R[:, 2, 0]) / s, (R[:, 1, 0] - R[:, 0, 1]) / s], -1)
+    q0 = np.stack([0.25 * s, (R[:, 2, 1] - R[:, 1, 2]) / s,
+                   (R[:, 0, 2] - R[:, 2, 0]) / s, (R[:, 1, 0] - R[:, 0, 1]) / s], -1)
     s = np.sqrt(np.maximum(1.0 + R[:, 0, 0] - R[:, 1, 1] - R[:, 2, 2], 1e-300)) * 2.0
-    q1 = np.stack([(R[:, 2, 1] - R[:, 1, 2]) / s, 0.25 * s, (R[:, 0, 1] + R[:, 1, 0]) / s, (R[:, 0, 2] + R[:, 2, 0]) / s], -1)
+    q1 = np.stack([(R[:, 2, 1] - R[:, 1, 2]) / s, 0.25 * s,
+                   (R[:, 0, 1] + R[:, 1, 0]) / s, (R[:, 0, 2] + R[:, 2, 0]) / s], -1)
     s = np.sqrt(np.maximum(1.0 - R[:, 0, 0] + R[:, 1, 1] - R[:, 2, 2], 1e-300)) * 2.0
-    q2 = np.stack([(R[:, 0, 2] - R[:, 2, 0]) / s, (R[:, 0, 1] + R[:, 1, 0]) / s, 0.25 * s, (R[:, 1, 2] + R[:, 2, 1]) / s], -1)
+    q2 = np.stack([(R[:, 0, 2] - R[:, 2, 0]) / s, (R[:, 0, 1] + R[:, 1, 0]) / s,
+                   0.25 * s, (R[:, 1, 2] + R[:, 2, 1]) / s], -1)
     s = np.sqrt(np.maximum(1.0 - R[:, 0, 0] - R[:, 1, 1] + R[:, 2, 2], 1e-300)) * 2.0
-    q3 = np.stack([(R[:, 1, 0] - R[:, 0, 1]) / s, (R[:, 0, 2] + R[:, 2, 0]) / s, (R[:, 1, 2] + R[:, 2, 1]) / s, 0.25 * s], -1)
+    q3 = np.stack([(R[:, 1, 0] - R[:, 0, 1]) / s, (R[:, 0, 2] + R[:, 2, 0]) / s,
+                   (R[:, 1, 2] + R[:, 2, 1]) / s, 0.25 * s], -1)
     allq = np.stack([q0, q1, q2, q3], axis=1)
     q = allq[np.arange(R.shape[0]), k]
     q *= np.where(q[:, :1] < 0.0, -1.0, 1.0)
@@ -113,4 +117,5 @@ def tangent_inv(theta: np.ndarray) -> np.ndarray:
     # (1 - eta) e e^T = (1 - eta)/t^2 theta theta^T ; (1-eta)/t^2 -> 1/12 for t -> 0
     c = np.where(small, 1.0 / 12.0 + t2 / 720.0, (1.0 - eta) / ts**2)
     eye = np.broadcast_to(np.eye(3), theta.shape[:-1] + (3, 3))
-    return eta[..., None, None] * eye + c[..., None, None] * (theta[..., :, None] * theta[..., None, :]) - 0.5 * skew(theta)
+    return (eta[..., None, None] * eye + c[..., None, None] * (theta[..., :, None] * theta[..., None, :])
+            - 0.5 * skew(theta))

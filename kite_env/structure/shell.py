@@ -42,8 +42,16 @@ from __future__ import annotations
 import numpy as np
 
 from .shell_bending import bending_internal, dkt_stiffness, element_frame, local_rotations
-from .shell_membrane import SLACK, TAUT, WRINKLED, cst_reference, fabric_matrix, membrane_internal, \
-    plane_stress_matrix, principal_strains
+from .shell_membrane import (
+    SLACK,
+    TAUT,
+    WRINKLED,
+    cst_reference,
+    fabric_matrix,
+    membrane_internal,
+    plane_stress_matrix,
+    principal_strains,
+)
 
 __all__ = ["ShellSet", "pressure_load", "TAUT", "WRINKLED", "SLACK"]
 
@@ -117,7 +125,7 @@ class ShellSet:
         fr = element_frame(Xe)
         bad = np.flatnonzero(fr["nn"] <= 1e-12 * fr["lam"])
         if bad.size:
-            raise ValueError("ShellSet: degenerate triangle(s) at rows %s" % bad[:10])
+            raise ValueError(f"ShellSet: degenerate triangle(s) at rows {bad[:10]}")
         self.R0 = fr["Rr"]  # (n_e, 3, 3) reference element frames
         self.xy = np.einsum("nia,nki->nka", self.R0, Xe - Xe[:, :1])[:, :, :2]  # (n_e, 3, 2) local coords
         self.A0, self.G = cst_reference(self.xy)

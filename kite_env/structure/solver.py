@@ -84,15 +84,15 @@ class NodalState:
     x: np.ndarray
     Rn: np.ndarray
 
-    def copy(self) -> "NodalState":
+    def copy(self) -> NodalState:
         return NodalState(self.x.copy(), self.Rn.copy())
 
     @classmethod
-    def reference(cls, X0: np.ndarray) -> "NodalState":
+    def reference(cls, X0: np.ndarray) -> NodalState:
         X0 = np.asarray(X0, dtype=float)
         return cls(X0.copy(), np.broadcast_to(np.eye(3), (X0.shape[0], 3, 3)).copy())
 
-    def updated(self, du: np.ndarray) -> "NodalState":
+    def updated(self, du: np.ndarray) -> NodalState:
         """New state after the increment ``du`` (6 n_nodes,): translations added, spins applied as rotations."""
         d = du.reshape(-1, DOF_PER_NODE)
         if _rotate_nodes is not None:

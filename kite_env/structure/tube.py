@@ -107,8 +107,9 @@ def tube_properties(pressure_pa: float | np.ndarray, diameter_m: np.ndarray, ele
         i = int(np.flatnonzero(bad.ravel())[0])
         raise ValueError(
             f"Breukels' tube correlations are non-physical for d = {np.broadcast_to(d, D.shape).ravel()[i]:.4f} m at "
-            f"p = {np.broadcast_to(p, D.shape).ravel()[i]:.3f} bar (limit load {D.ravel()[i]:.3g} N, slope {N.ravel()[i]:.3g} N/m, "
-            f"torsion c1 {c1.ravel()[i]:.3g}, c2 {c2.ravel()[i]:.3g}); the fits are calibrated for ~0.1-0.3 m tubes at 0.1-1 bar"
+            f"p = {np.broadcast_to(p, D.shape).ravel()[i]:.3f} bar (limit load {D.ravel()[i]:.3g} N, "
+            f"slope {N.ravel()[i]:.3g} N/m, torsion c1 {c1.ravel()[i]:.3g}, c2 {c2.ravel()[i]:.3g}); "
+            "the fits are calibrated for ~0.1-0.3 m tubes at 0.1-1 bar"
         )
     EI0 = N * L_CAL**3 / 3.0  # cantilever: v = P L^3 / (3 EI)
     k_fold = k_closed = None

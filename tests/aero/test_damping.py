@@ -174,7 +174,7 @@ def test_projection_is_inactive_where_the_raw_damping_is_psd_and_exact_where_not
     wing, flight_nom, shapes = wing_shapes
     n_psd = n_proj = 0
     for x in shapes.values():
-        for V, a, b, flight in sampled_states():
+        for _V, _a, _b, flight in sampled_states():
             C = damping(wing, x, flight)
             ref, _, margin = analytic_damping(wing, x, flight)
             raw = raw_damping(wing, x, flight)

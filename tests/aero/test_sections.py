@@ -181,7 +181,8 @@ def test_section_order_does_not_change_frames():
 
 
 # --------------------------------------------------------------------------- inflow (Eq. 2-3)
-def alpha_of(x, v_kite=np.zeros(3), omega=np.zeros(3), v_wind=np.zeros(3), x_prev=None, dt=None, d=0.2):
+def alpha_of(x, v_kite=None, omega=None, v_wind=None, x_prev=None, dt=None, d=0.2):
+    v_kite, omega, v_wind = (np.zeros(3) if a is None else a for a in (v_kite, omega, v_wind))
     g = section_geometry(x, np.full(x.shape[0], d))
     u_loc, alpha = inflow(apparent_wind(x, v_kite, omega, v_wind, x_prev, dt), g)
     return alpha, u_loc

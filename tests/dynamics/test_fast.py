@@ -100,7 +100,7 @@ def test_batched_kites_equal_single_kites(setup):
     winds = [WindField(dataclasses.replace(cfg.wind, speed_mps=u, turbulence_intensity=ti, seed=s))
              for u, ti, s in ((5.0, 0.0, 0), (6.0, 0.08, 1), (4.5, 0.05, 2))]
     singles = []
-    for k, (wf, s0) in enumerate(zip(winds, (0.0, 0.4, 5.9))):
+    for wf, s0 in zip(winds, (0.0, 0.4, 5.9)):
         sim = SurrogateFlightSimulator(cfg, wf, surrogate=sw, wing=wing)
         _start(sim, path, s0)
         singles.append(sim)
@@ -302,7 +302,7 @@ def test_compiled_mlp_is_the_surrogate(setup, K_b):
     ks.set_wind(0, sim.wind)
     ks.set_kite(0, sim.state.r, sim.state.v, sim.t, sim.pair_stiffness, sim.L_B0, sim.L_D0)
     ks.evaluate()
-    for n in range(20):
+    for _ in range(20):
         ks.step(np.array([sim.L_B0 - 0.03]), np.array([sim.L_D0 + 0.03]))
         assert np.all(np.isfinite(ks.X[0])) and np.all(np.isfinite(ks.Y[0]))
         np.testing.assert_array_less(np.abs(ks.Y[0] - sw.predict(ks.X[0])) / scale, 2e-5)

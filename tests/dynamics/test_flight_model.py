@@ -57,8 +57,8 @@ def test_the_open_loop_flight_flies_the_configured_wing_with_the_force_loop_hold
     inertia by default; before, always the quasi-static wing), and the force controller on the common rest length
     keeps both steering lines loaded through the window; with both rest lengths held (force_loop=False) the climbing
     kite's released line goes slack."""
-    from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
     import kite_env.turn_rate as tr
+    from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
 
     built = []
     real = tr.make_simulator

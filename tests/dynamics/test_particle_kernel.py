@@ -9,7 +9,7 @@ import pytest
 
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations
-from kite_env.dynamics.particles import A, B, C, D, KCU, ParticleSystem
+from kite_env.dynamics.particles import KCU, A, B, C, D, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator
 from kite_env.structure import kernels as structure_kernels
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kite_env.config import DynamicsConfig
-from kite_env.dynamics.particles import A, B, C, D, KCU, ParticleSystem
+from kite_env.dynamics.particles import KCU, A, B, C, D, ParticleSystem
 
 
 def system(**kw):

@@ -1061,7 +1061,8 @@ def test_the_linearised_rig_predicts_the_growth_of_its_yaw_mode():
         zeta_rig = -r.growth_rate_per_s() / (2.0 * np.pi * m.frequency_hz[j])
         assert abs(m.frequency_hz[j] - r.frequency_hz()) < 0.34  # (the 3 s record's spectral resolution)
         assert abs(m.damping_ratio[j] - zeta_rig) < 0.005
-        assert sign * m.damping_ratio[j] > 0.005  # M_a a alone stable, the normal-rate force growing (at the former damping)
+        # M_a a alone stable, the normal-rate force growing (at the former damping)
+        assert sign * m.damping_ratio[j] > 0.005
         assert sign * zeta_rig > 0.005
     c = tethered_wing_modes(base, rigid_inflow=False)
     assert c.damping_ratio[c.yaw_mode()] > 0.1

@@ -15,7 +15,7 @@ import pytest
 
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations
-from kite_env.dynamics.particles import A, B, C, D, KCU
+from kite_env.dynamics.particles import KCU, A, B, C, D
 from kite_env.dynamics.simulator import FlightSimulator
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame
@@ -120,7 +120,7 @@ def test_condensed_mass_is_spd_and_carries_the_total_mass_in_translation(loaded,
     Measured: up to 3.7e-5 relative on the loaded wing (the aero load Jacobian by forward differences, h = 1e-6 m,
     in the tangent; asserted 1e-4), 3e-10 and 6e-10 on the nearly unloaded ones (asserted 1e-8)."""
     S = np.tile(np.eye(3), (4, 1))
-    for (wing, m_n, M, _), tol in ((loaded, 1e-4), (nearly_unloaded[0], 1e-8), (nearly_unloaded[1], 1e-8)):
+    for (_wing, m_n, M, _), tol in ((loaded, 1e-4), (nearly_unloaded[0], 1e-8), (nearly_unloaded[1], 1e-8)):
         assert M.shape == (12, 12)
         np.testing.assert_array_equal(M, M.T)
         assert np.linalg.eigvalsh(M).min() > 1e-3
@@ -309,7 +309,7 @@ def test_diagonal_wing_mass_reproduces_the_point_masses(flight, backend):
     M_pts = np.diag(np.repeat(p.m[:4], 3))
     rhs_fn = kernel_rhs if backend == "numba" else numpy_rhs
     try:
-        for r, v, rng in random_states(sim, seed=3):
+        for r, v, _rng in random_states(sim, seed=3):
             p.set_wing_mass(None)
             assert p.kernel_parameters()[-1] is False
             a0, lam0 = rhs_fn(sim, 0.2, r, v)

@@ -25,7 +25,8 @@ seed = int(args[args.index("--seed") + 1])
 out = Path(args[args.index("--out") + 1])
 if seed == {failing}:
     sys.stderr.write("kite-eval: error: numerical failure at t = 7.2500 s (wind 8.123 m/s, turbulence 0.1000, wind "
-                     "seed 5, start s 0.1000, start speed 33.000 m/s): wing did not converge: forced; nothing written\\n"
+                     "seed 5, start s 0.1000, start speed 33.000 m/s): wing did not converge: forced; "
+                     "nothing written\\n"
                      "this is a bug of the simulator, not an end of the flight\\nresidual history (last 1): test\\n")
     sys.exit(3)
 if seed == {broken}:

@@ -247,7 +247,7 @@ def test_baseline_through_the_env_flies_a_whole_figure_eight_and_beats_random_an
     def run(policy, seed=0, horizon_s=22.0):
         env = KiteFigureEightEnv(overrides=[f"env.max_episode_s={horizon_s}"])
         obs, _ = env.reset(seed=seed)
-        start, ret, dist, s_path = True, 0.0, [], []
+        start, ret, dist = True, 0.0, []
         while True:
             a, _ = policy(obs, start)
             start = False

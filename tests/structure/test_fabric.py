@@ -5,14 +5,22 @@ in-plane shear modulus, relaxed by tension-field theory for any material matrix
 import numpy as np
 import pytest
 from scipy.optimize import minimize
-from test_shell_helpers import fd_tangent
 
 from kite_env.config import ConfigError, load_config
 from kite_env.geometry import build_kite
 from kite_env.structure.rotations import expm
 from kite_env.structure.shell import ShellSet
-from kite_env.structure.shell_membrane import SLACK, TAUT, WRINKLED, fabric_matrix, plane_stress_matrix, \
-    relaxed_general, relaxed_svk
+from kite_env.structure.shell_membrane import (
+    SLACK,
+    TAUT,
+    WRINKLED,
+    fabric_matrix,
+    plane_stress_matrix,
+    relaxed_general,
+    relaxed_svk,
+)
+
+from test_shell_helpers import fd_tangent
 
 E_CANOPY, NU, H_CANOPY = 1250e6, 0.3, 0.08e-3  # paper Sect. II.A
 

@@ -8,13 +8,14 @@ is singular.
 
 import numpy as np
 import pytest
-import test_beam as _tb  # noqa: I001  (the sibling module's finite differences)
 
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
 from kite_env.structure.hem import HemSet
 from kite_env.structure.rotations import expm
 from kite_env.structure.solver import NodalState, StaticSolver
+
+import test_beam as _tb  # the sibling module's finite differences
 
 
 def random_rods(rng, n_e):

@@ -2,16 +2,13 @@
 
 For random large-deformation states (taut, wrinkled and slack membranes; large and tiny rotations, so that every
 series / closed-form branch of the rotation functions is taken) and for the real kite mesh, the numba and numpy
-backends of ``BeamSet``, ``HemSet`` and ``ShellSet`` must give the same force, tangent and energy to 1e-10 relative (they
-differ only by round-off).  The finite-difference tangent and wrinkling tests of ``test_beam.py`` and
+backends of ``BeamSet``, ``HemSet`` and ``ShellSet`` must give the same force, tangent and energy to 1e-10 relative
+(they differ only by round-off).  The finite-difference tangent and wrinkling tests of ``test_beam.py`` and
 ``test_shell.py`` are run again through each backend explicitly.
 """
 
 import numpy as np
 import pytest
-import test_beam as _tb  # noqa: I001  (sibling test modules: re-run their checks per backend)
-import test_hem as _th
-import test_shell as _ts
 
 from kite_env.geometry import build_kite
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
@@ -21,6 +18,10 @@ from kite_env.structure.hem import HemSet
 from kite_env.structure.rotations import expm
 from kite_env.structure.shell import SLACK, TAUT, WRINKLED, ShellSet
 from kite_env.structure.shell_bending import element_frame, local_rotations
+
+import test_beam as _tb  # sibling test modules: re-run their checks per backend
+import test_hem as _th
+import test_shell as _ts
 
 RTOL = 1e-10
 E_CANOPY, NU, H_CANOPY = 1250e6, 0.3, 0.08e-3

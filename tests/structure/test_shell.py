@@ -2,13 +2,14 @@
 
 import numpy as np
 import pytest
-from test_shell_helpers import disk_mesh, fd_tangent, hencky_coefficients, irregular_rect_mesh, square_mesh
 
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell import SLACK, TAUT, WRINKLED, ShellSet, pressure_load
 from kite_env.structure.shell_bending import _log_rotation, bending_internal, dkt_stiffness
 from kite_env.structure.solver import NodalState, StaticSolver
+
+from test_shell_helpers import disk_mesh, fd_tangent, hencky_coefficients, irregular_rect_mesh, square_mesh
 
 E_CANOPY, NU, H_CANOPY = 1250e6, 0.3, 0.08e-3  # paper Sect. II.A
 IDX_T = np.array([0, 1, 2, 6, 7, 8, 12, 13, 14])

@@ -13,8 +13,17 @@ import pytest
 from kite_env.config import Config, ModelMismatch, fingerprint, load_config
 from kite_env.frames import kite_frame
 from kite_env.fsi import FlightState
-from kite_env.surrogate.fit import (FILTERED, TAUS, FitData, build_dataset, filter_gain, fit_mlp, history_names,
-                                    latent_features, tape_samples)
+from kite_env.surrogate.fit import (
+    FILTERED,
+    TAUS,
+    FitData,
+    build_dataset,
+    filter_gain,
+    fit_mlp,
+    history_names,
+    latent_features,
+    tape_samples,
+)
 from kite_env.surrogate.model import SurrogateWing, output_errors
 from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES, features
 from kite_env.surrogate.trajectories import COLUMNS, EpisodePlan, FlightTape, fly_plan, load_tape, save_tape
