@@ -130,7 +130,8 @@ def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = No
     algo = model_algorithm(path)
     from stable_baselines3 import PPO, SAC
 
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    classes: dict[str, type[PPO] | type[SAC]] = {"ppo": PPO, "sac": SAC}
+    cls = classes[algo]
     try:
         model = cls.load(path, device="cpu")
     except Exception as exc:  # SB3 raises many kinds on a damaged file

@@ -92,7 +92,9 @@ def _fit(args) -> int:
             "command": shlex.join(["kite-fit", *sys.argv[1:]]), "tapes": data.meta["episodes"]}
     q0 = wing.design_bridle
     tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
-    extra_X, extra_Y, extra_g = [], [], []
+    extra_X: list[np.ndarray] = []
+    extra_Y: list[np.ndarray] = []
+    extra_g: list[np.ndarray] = []
     for rnd in range(args.rounds + 1):
         fit_data = data if not extra_X else FitData(np.vstack([data.inputs, *extra_X]),
                                                      np.vstack([data.outputs, *extra_Y]),
@@ -143,7 +145,7 @@ def _start_table(args) -> int:
 def _agreement(args, base) -> int:
     from kite_env.surrogate.agreement import FLIGHTS, Flight, agreement_table, run_agreement
 
-    flights = FLIGHTS
+    flights: tuple[Flight, ...] = FLIGHTS
     if args.quick:
         flights = (Flight("5 m/s, 20 s", 5.0, 0.0, 20.0), Flight("8 m/s, turbulence 0.1, 20 s", 8.0, 0.1, 20.0))
         args.episodes, args.duration = min(args.episodes, 4), min(args.duration, 5.0)

@@ -20,6 +20,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import cast
 
 import yaml
 
@@ -92,7 +93,7 @@ def _objective(args, cfg, env_id, hp, kind, n_envs):
                     eval_env.obs_rms = venv.obs_rms
                 eval_env.seed(args.seed + VALIDATION_SEED_OFFSET)  # the same validation episodes every time
                 mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=episodes, deterministic=True)
-                self.last = float(mean)
+                self.last = float(cast(float, mean))  # a float without return_episode_rewards
                 trial.report(self.last, int(self.model.num_timesteps))
                 if trial.should_prune():
                     self.pruned = True

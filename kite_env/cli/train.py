@@ -68,7 +68,7 @@ def default_recipe(algo: str) -> Path:
     """The recipe shipped for ``algo`` (``agents/recipes/<algo>.yaml``)."""
     from importlib.resources import files
 
-    return Path(str(files("agents").joinpath("recipes", f"{algo}.yaml")))
+    return Path(str(files("agents") / "recipes" / f"{algo}.yaml"))
 
 
 class UsageError(Exception):

@@ -11,6 +11,7 @@ import dataclasses
 import math
 import os
 import time
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +24,9 @@ from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.flight import GROUND_ELEVATION_RAD
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: observation terms: (size, lower bound, upper bound) of each entry
 _TERM_SPECS = {
@@ -183,6 +187,8 @@ class KiteFigureEightEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    observation_space: spaces.Box
+    action_space: spaces.Box
 
     def __init__(self, config: Config | dict | str | None = None, overrides=(), render_mode: str | None = None,
                  wing=None, fidelity: str | None = None):
@@ -213,7 +219,7 @@ class KiteFigureEightEnv(gym.Env):
         self.recorder = None
         self.rec: StepRecord | None = None
         self._trail: list[np.ndarray] = []
-        self._fig = None
+        self._fig: Figure | None = None
         self._observer = Observer(cfg, self.path, self.layout)
         self._obs_buf = {"hint": np.zeros(1), "act": np.zeros(1), "tether": np.zeros(1), "t": np.zeros(1),
                          "parts": np.zeros((1, N_PARTS)), "feats": np.zeros((1, len(FEATURES)))}
@@ -265,6 +271,7 @@ class KiteFigureEightEnv(gym.Env):
                 failed_starts += 1
         else:
             raise StartError(f"reset failed: the wing did not converge at the start ({last_error})")
+        assert self.sim is not None and self.sim.L_B0 is not None and self.sim.L_D0 is not None  # set by the reset
         self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
         self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
         self.s_hint = s0
@@ -290,6 +297,7 @@ class KiteFigureEightEnv(gym.Env):
         """Whether a numerical failure raises (the FE wing with inertia, ``structure.dynamic``: the simulator is total,
         a failure is a bug) instead of ending the episode (the paper's quasi-static wing, which has no state to carry
         it through a luffing canopy, and the surrogate's non-finite states)."""
+        assert self.sim is not None
         return self.cfg.structure.dynamic and self.sim.fidelity_now == "fe"
 
     def _conditions(self) -> str:
@@ -301,10 +309,11 @@ class KiteFigureEightEnv(gym.Env):
     def step(self, action):
         if self.rec is None:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.size != 1:
+        assert self.sim is not None  # built with the first record
+        arr = np.asarray(action, dtype=np.float64).reshape(-1)
+        if arr.size != 1:
             raise ValueError(f"action must have one element, got shape {np.shape(action)}")
-        a = float(a[0])
+        a = float(arr[0])
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {a!r}")
         a = min(1.0, max(-1.0, a))
@@ -397,10 +406,10 @@ class KiteFigureEightEnv(gym.Env):
             from matplotlib.figure import Figure
 
             fig = Figure(figsize=(8, 4), dpi=80)
-            FigureCanvasAgg(fig)
+            canvas = FigureCanvasAgg(fig)
             self._draw(fig)
-            fig.canvas.draw()
-            return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+            canvas.draw()
+            return np.asarray(canvas.buffer_rgba())[..., :3].copy()
         import matplotlib.pyplot as plt
 
         if self._fig is None or not plt.fignum_exists(self._fig.number):
@@ -412,6 +421,7 @@ class KiteFigureEightEnv(gym.Env):
         return None
 
     def _draw(self, fig) -> None:
+        assert self.sim is not None and self.rec is not None  # render() checks that reset() was called
         s = np.linspace(0.0, 2.0 * math.pi, 400)
         P = self.path.point(s)
         trail = np.asarray(self._trail)
