@@ -312,7 +312,7 @@ def test_a_start_without_a_converged_wing_is_one_message_and_nothing_written(tmp
 def test_a_numerical_failure_of_the_wing_with_inertia_is_exit_3_with_its_residual_history(tmp_path, capsys,
                                                                                        monkeypatch):
     """A step of the wing with inertia that fails even in sixteenths (forced here from t = 0.1 s) is a bug of the
-    simulator, not an end of the flight (issue 20): kite-eval says where and in which conditions, prints the wing
+    simulator, not an end of the flight: kite-eval says where and in which conditions, prints the wing
     solver's residual history, exits 3 and writes nothing."""
     from kite_env.dynamics.wing_dynamics import WingDynamics
     from kite_env.fsi import WingConvergenceError

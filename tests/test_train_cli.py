@@ -78,7 +78,6 @@ def test_resume_continues_from_the_last_checkpoint(tmp_path):
     assert (out / "checkpoints" / "model_64_steps.zip").is_file()
 
 
-@pytest.mark.slow  # the FE model: ~15-35 s
 def _failing_step(at_call: int, t: float):
     """``KiteFigureEightEnv.step`` that raises a forced NumericalFailure at time ``t`` on its ``at_call``-th call (per
     process), and the original step."""
@@ -98,6 +97,7 @@ def _failing_step(at_call: int, t: float):
     return failing, step
 
 
+@pytest.mark.slow  # the FE model: ~15-35 s
 def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(tmp_path, capsys, monkeypatch):
     """A NumericalFailure of the wing with inertia during training (forced at the env's 25th step) is reported as
     one error line with the failure's message, exit 3, after a checkpoint of what was learnt; --resume continues."""
@@ -123,6 +123,7 @@ def test_a_numerical_failure_saves_a_checkpoint_and_exits_3_and_the_run_resumes(
     assert PPO.load(out / "model.zip", device="cpu").num_timesteps >= 64  # (whole PPO rollouts of 16 from 24)
 
 
+@pytest.mark.slow  # the FE model in two forked workers: ~15-35 s
 def test_a_numerical_failure_in_a_subproc_worker_saves_a_checkpoint_and_exits_3(tmp_path, capsys, monkeypatch):
     """The same with the envs in subproc workers (forked here, so that they inherit the forced failure at each
     worker's 13th step): the worker writes its NumericalFailure into the run folder before it ends, and the run
@@ -228,7 +229,7 @@ def test_kite_bench_writes_bench_json(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
-# ------------------------------------------------------------------ recipes and the batched fast env (issue 6)
+# ------------------------------------------------------------------ recipes and the batched fast env
 FAST = ["--fidelity", "surrogate", "--set", "env.max_episode_s=0.3"]
 RECIPE_ENV = {"env.wind_speed_min_mps": 4.0, "env.wind_speed_max_mps": 9.0, "env.random_start": True,
               "env.initial_speed_min_mps": 19.0}

@@ -83,8 +83,8 @@ def test_the_script_prints_one_row_per_mesh_and_refuses_bad_input(load_script, c
 
 
 def test_a_cold_solve_whose_load_ramp_fails_is_made_again_with_a_finer_ramp():
-    """37 x 8 nodes with the trailing-edge hem as co-rotational beams (``structure.te_hem_element=beam``, before stop
-    43): the default ramp of 6 steps passes through states without a stable equilibrium nearby and fails; the solve
+    """37 x 8 nodes with the trailing-edge hem as co-rotational beams (``structure.te_hem_element=beam``): the default
+    ramp of 6 steps passes through states without a stable equilibrium nearby and fails; the solve
     is made again from the unloaded wing with 12 steps, which reach the equilibrium (the same one a wing configured
     with 12 steps reaches); the default mesh needs no restart. With the default frame-free hem the 6 steps reach it
     (docs/flight_model.md, section 37)."""

@@ -38,8 +38,8 @@ def test_bench_flight_script_rejects_bad_input_and_writes_nothing(tmp_path):
 
 
 def test_kite_bench_reports_the_full_models_newton_iterations():
-    """kite-bench's fe row: wall time per simulated second and the Newton iterations per physics step (issues 19/20's
-    speed targets: mean below 2, p99 below 10) from the env's ``info["newton_iters"]``."""
+    """kite-bench's fe row: wall time per simulated second and the Newton iterations per physics step (the speed
+    targets: mean below 2, p99 below 10) from the env's ``info["newton_iters"]``."""
     from kite_env.cli.bench import bench_env
 
     r = bench_env(3)

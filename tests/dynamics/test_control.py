@@ -120,7 +120,7 @@ def test_actuator_speed_limit():
 def test_kcu_steering_and_depower_motors_have_their_own_speed():
     """control.actuator_axes = steer_depower (default): half the difference and the mean of the two rest lengths
     each move at most line_speed_max_mps; a saturated steering command leaves the force loop's common change its
-    speed. per_line (stops 25-27) limits each rest length, so the same command leaves the common mode where it was."""
+    speed. per_line limits each rest length, so the same command leaves the common mode where it was."""
     from kite_env.control import actuate
 
     step = 2.0 * 0.02

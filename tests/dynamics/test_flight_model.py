@@ -53,8 +53,8 @@ def test_held_steering_input_turns_the_kite_the_right_way_and_faster_with_more_i
 
 
 def test_the_open_loop_flight_flies_the_configured_wing_with_the_force_loop_holding_the_lines(monkeypatch):
-    """kite_env.turn_rate.open_loop_flight (stop 39): it builds the simulator of the configuration (the wing with
-    inertia by default; before, always the quasi-static wing), and the force controller on the common rest length
+    """kite_env.turn_rate.open_loop_flight: it builds the simulator of the configuration (the wing with
+    inertia by default, not always the quasi-static wing), and the force controller on the common rest length
     keeps both steering lines loaded through the window; with both rest lengths held (force_loop=False) the climbing
     kite's released line goes slack."""
     import kite_env.turn_rate as tr
@@ -102,7 +102,7 @@ def test_the_papers_configuration_flies_the_figure_and_turns_more_per_input_than
     Eq. 9 as printed, the rod tether, the proportional force loop, no actuator limit) flies 20 s of the baseline: no
     step made in halves, one figure-eight tracked within 3.5 deg RMS, and the heading turns faster per metre of input
     than the quasi-static wing with the defaults (measured over 60 s: 149 against 77 deg/s per m; docs section 33;
-    the default wing with inertia 153 since stop 44, 125 with ``M_a a`` alone, section 38)."""
+    the default wing with inertia 153, 125 with ``M_a a`` alone, section 38)."""
     from kite_env.metrics import compute_metrics
 
     cfg = load_config(PAPER)
@@ -118,7 +118,7 @@ def test_the_papers_configuration_flies_the_figure_and_turns_more_per_input_than
 
 
 def test_theodorsens_force_turns_the_held_kite_faster_than_the_added_mass_times_the_acceleration_alone():
-    """The default added-mass force (stop 44) is Theodorsen's non-circulatory load: ``M_a a`` plus the normal-rate part
+    """The default added-mass force is Theodorsen's non-circulatory load: ``M_a a`` plus the normal-rate part
     that cancels it in a steady turn. ``M_a a`` alone pulls each section with its added mass times the turn's
     centripetal acceleration, as if the air turned with the wing, and the held kite turns slower: open loop at 5 m/s,
     the force loop on, 2.18 / 2.06 against 1.78 / 1.69 rad/s per m at 0.1 / 0.3 m (docs/flight_model.md, section 38;

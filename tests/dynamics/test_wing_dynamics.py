@@ -1,6 +1,6 @@
 """The wing with inertia (structure.dynamic, kite_env/dynamics/wing_dynamics.py): what holds so far.
 
-The default wing since stop 33 (docs/flight_model.md, sections 12-21). These tests check the integrator's pieces,
+The default wing (docs/flight_model.md, sections 12-21). These tests check the integrator's pieces,
 the linearised wing at the start of a flight and short flights.
 """
 
@@ -14,6 +14,7 @@ from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
 from kite_env.dynamics.simulator import make_simulator
 from kite_env.dynamics.wing_dynamics import AlphaParameters, WingDynamics, _StepLoad, line_tension
 from kite_env.dynamics.wing_mass import nodal_wing_mass
+from kite_env.fsi import WingConvergenceError
 from kite_env.polar import nominal_wing
 from kite_env.structure.rotations import logm
 from kite_env.structure.solver import NodalState
@@ -324,14 +325,14 @@ def test_energy_balance_without_dissipation(rotary):
 
 @pytest.mark.parametrize("membrane_forces", ["energy_consistent", "averaged"])
 def test_energy_over_1000_steps_without_dissipation(membrane_forces):
-    """Issue 20's energy check: rho_inf = 1, no aerodynamics, no structural damping, 1000 steps of 5 ms. The energy is
+    """Energy conservation: rho_inf = 1, no aerodynamics, no structural damping, 1000 steps of 5 ms. The energy is
     the kinetic energy plus the stored energy of the structure (``strain_energy``: the tubes' Breukels law as an
     energy, so the conservative tube law, structure.tube_curvature = element_energy, is needed). With the canopy's
     membrane forces as the discrete gradient of their energy, it is kept to 2e-6 of E0 (E0 is mostly the wing's
     translation; the deformation's energy is about 0.3 J, the drift 4e-3 J). Generalized-alpha's averaged end forces
     are not energy-consistent for the membrane's geometric nonlinearity: their energy error is 7-13 % of the
     deformation's energy (0.022-0.044 J), or, once it starts to grow, Newton fails (at step 695 with the step's held
-    quantities at its start, before stop 32; whether and when that growth starts depends on round-off: with the air
+    quantities taken at its start; whether and when that growth starts depends on round-off: with the air
     density of this vacuum at 2e-12 instead of 1e-12 kg/m^3 the same code ran the 1000 steps with 0.022 J). The
     canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the averaged forces gain 75 %
     of E0 within 0.3 s, and the discrete gradient's Newton iteration does not converge on a canopy that is slack all
@@ -343,7 +344,7 @@ def test_energy_over_1000_steps_without_dissipation(membrane_forces):
     for k in range(1000):
         try:
             step(0.005)
-        except Exception:  # noqa: BLE001 - the averaged forces' failure is what is measured
+        except WingConvergenceError:  # Newton's failure under the averaged forces is what is measured
             failed = k
             break
         U = wing.strain_energy(d.state)
@@ -373,7 +374,7 @@ def test_a_free_wrinkling_canopy_gains_no_energy_with_the_flights_structural_dam
     for k in range(400 if rayleigh else 100):
         try:
             step(0.005)
-        except Exception:  # noqa: BLE001 - the undamped wing's failure is what is measured
+        except WingConvergenceError:  # Newton's failure on the undamped wing is what is measured
             failed = k
             break
         E.append(d.kinetic_energy() + wing.strain_energy(d.state))
@@ -447,11 +448,11 @@ def test_dynamic_wing_flies_the_baseline_with_taut_steering_lines():
 
 def test_the_structural_damping_at_the_wings_lowest_mode_removes_its_yaw_oscillation():
     """``structure.rayleigh_beta_s`` gives Table 1's 2 % of critical at 4 Hz, the wing's lowest elastic mode in
-    flight (its yaw/twist mode on the lines, 3.6-3.9 Hz), instead of at 10 Hz (6.4e-4 s, before stop 42), where that
+    flight (its yaw/twist mode on the lines, 3.6-3.9 Hz), instead of at 10 Hz (6.4e-4 s), where that
     mode got 0.8 % and oscillated through every flight, which the paper's Fig. 18 and flight tests do not show
     (docs/flight_model.md, section 36). Over 0.5-4 s of the baseline the yaw rate's part above 2 Hz: 0.039 rad/s RMS
     and B's transverse position 0.4 cm RMS, against 0.17 rad/s and 1.3 cm at the former damping, measured with the
-    trailing-edge hem of then (co-rotational beams; with the frame-free hem of stop 43 0.12 rad/s and 0.9 cm)."""
+    trailing-edge hem as co-rotational beams (with the frame-free hem 0.12 rad/s and 0.9 cm)."""
     from kite_env.frames import to_frame
 
     def high(y):  # the part above 2 Hz of a series sampled every 5 ms
@@ -475,7 +476,7 @@ def test_the_structural_damping_at_the_wings_lowest_mode_removes_its_yaw_oscilla
 
 
 def test_the_dynamic_flight_does_not_depend_on_the_time_step():
-    """Issue 19's time-step check with the wing with inertia and the default Newton tolerance: the baseline at dt =
+    """The time-step check with the wing with inertia and the default Newton tolerance: the baseline at dt =
     2.5 and 10 ms against 5 ms. The step's held quantities (reference inflow, section damping, added mass,
     structural damping) are taken at the step's predicted end, where generalized-alpha takes the forces; held at its
     start they lag by one step and the KCU drifted along the path at first order (17 cm after 4 s, 39 cm after 8 s;
@@ -647,7 +648,7 @@ def test_a_failed_step_retries_with_the_damping_tangent_of_its_own_start(monkeyp
 
 def test_the_held_rayleigh_tangent_keeps_the_flight_and_its_newton_iterations():
     """The baseline's first 10 s with the structural damping's tangent held over 20 ms (the default) and assembled
-    at every step (``rayleigh_tangent_period_s = 0``, stops 31-36): the KCU within a centimetre (0.66 cm), and no
+    at every step (``rayleigh_tangent_period_s = 0``): the KCU within a centimetre (0.66 cm), and no
     more Newton iterations per step (1.58 against 1.59). (Over the first seconds the two counts differ by their
     noise: 1.89 / 1.18 / 1.14 against 1.81 / 1.02 / 1.26 in the first three; the steps that assemble the tangent
     again make more in the start's first second, 2.14 against 1.8.)"""
@@ -667,13 +668,13 @@ def test_the_tip_rod_correction_saves_newton_iterations_and_leaves_the_flight(mo
     """The baseline's first second with and without the correction of a kept factorisation for the tip rods
     (``_StepLoad.tangent_change``): fewer Newton iterations per step; with Newton converged tightly (1e-6 of the
     load) the same flight. (At the default tolerance, 1e-3, the two differ within it: 1.4 cm after 1.5 s.) Over this
-    second 1.52 against 1.92 iterations per step (stop 35, the residual dropped); carrying all of each step's residual
+    second 1.52 against 1.92 iterations per step (the residual dropped); carrying all of each step's residual
     into the next (``structure.carry_residual=full``) 1.78 against 2.02. The Rayleigh damping's tangent is assembled
-    at every step here (``rayleigh_tangent_period_s = 0``, stops 31-36), so that the two runs differ by the
-    correction alone; with the default, held over 20 ms, 1.68 against 1.95 over this second (stop 37: in the start's
+    at every step here (``rayleigh_tangent_period_s = 0``), so that the two runs differ by the
+    correction alone; with the default, held over 20 ms, 1.68 against 1.95 over this second (in the start's
     first second the steps that assemble the held tangent again make more iterations, with or without it).
-    Run at the structural damping before stop 42 (``rayleigh_beta_s`` 6.4e-4 s), where those numbers were measured;
-    with the default since then (1.6e-3 s, more damping of the deformation that a kept factorisation lags behind)
+    Run at a structural damping of ``rayleigh_beta_s`` 6.4e-4 s, where those numbers were measured;
+    with the default (1.6e-3 s, more damping of the deformation that a kept factorisation lags behind)
     the correction saves less: 1.44 against 1.70 iterations per step over the same second."""
     base = Config()
     base = dataclasses.replace(base, structure=dataclasses.replace(base.structure, rayleigh_beta_s=6.4e-4))
@@ -748,7 +749,7 @@ def test_rope_tether_goes_slack_and_catches_the_kcu_again():
     assert slack[-10:].all() and np.all(r_k[slack] <= l_t + 1e-9) and r_k[-1] < l_t - 1e-4
     # lines taken back at 2 m/s (the actuator's limit): the wing pulls again, the KCU is caught on the sphere and
     # the rope carries; wherever it carries, the catch has removed the outward radial speed. The kite, slowed while it
-    # flew free, pulls weakly and its tether goes slack again later (Theodorsen's force, the default since stop 44:
+    # flew free, pulls weakly and its tether goes slack again later (Theodorsen's force, the default:
     # caught at 0.035 s, slack from 2.16 s to 5.54 s; M_a a alone: caught at 0.035 s, slack at 1.03-1.08 s and from
     # 1.97 s to 3.16 s), so the first second is asserted
     sim, _, L_B0, L_D0, rest0 = out["rope"]
@@ -805,14 +806,13 @@ def _held_wing_ramp(structural_mass_scale=1.0, V0=20.0, V1=25.0, ramp_s=2.0, set
 
 @pytest.mark.parametrize("case", ["default", "mass -> 0", "40 to 55 m/s"])
 def test_a_slow_airspeed_ramp_follows_the_static_wing(case):
-    """Issue 20's checks against the static wing, on the wing with inertia held at its bridle points (the static
-    wing's boundary conditions): the airspeed ramped, its bridle forces stay within 0.5 % of the static wing's and
-    its shape within 5 mm. ``default``: 20 to 25 m/s over 2 s, measured 0.077 % (the aerodynamic damping's lag:
-    smaller for a slower ramp) and 2.6 mm. ``mass -> 0``: the structural mass times 1e-3, no added mass, no rotary
-    inertia: 0.077 % and 2.7 mm, the step a damped static solve. ``40 to 55 m/s`` over 6 s (a 10 m/s kite's
-    airspeeds): 0.065 % and 2.2 mm, no flutter (with the flight's reference inflow, the rigid fit of the nodes'
-    velocities, the held trailing edge oscillated from 44 m/s and the light wing from 22 m/s: docs/flight_model.md,
-    section 20)."""
+    """The wing with inertia held at its bridle points (the static wing's boundary conditions): the airspeed ramped,
+    its bridle forces stay within 0.5 % of the static wing's and its shape within 5 mm. ``default``: 20 to 25 m/s over
+    2 s, measured 0.077 % (the aerodynamic damping's lag: smaller for a slower ramp) and 2.6 mm. ``mass -> 0``: the
+    structural mass times 1e-3, no added mass, no rotary inertia: 0.077 % and 2.7 mm, the step a damped static solve.
+    ``40 to 55 m/s`` over 6 s (a 10 m/s kite's airspeeds): 0.065 % and 2.2 mm, no flutter (with the flight's reference
+    inflow, the rigid fit of the nodes' velocities, the held trailing edge oscillated from 44 m/s and the light wing
+    from 22 m/s: docs/flight_model.md, section 20)."""
     kw = {"default": {}, "mass -> 0": dict(structural_mass_scale=1e-3, added_mass_factor=0.0,
                                            rotary_inertia_factor=0.0),
           "40 to 55 m/s": dict(V0=40.0, V1=55.0, ramp_s=6.0)}[case]
@@ -827,7 +827,7 @@ def test_a_slow_airspeed_ramp_follows_the_static_wing(case):
 
 
 def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
-    """Issue 20's luffing tip as a physical event: half the steering range held (``constant:0.5``) with the wing with
+    """A luffing tip as a physical event: half the steering range held (``constant:0.5``) with the wing with
     inertia, the rope tether and the 2 m/s actuator; the kite loops, and the inner tip's section unloads again and
     again: its angle of attack below zero (the paper's Fig. 12: the released tip after a lobe) for a fifth of the
     time, down to -6 deg, its lift near zero (the canopy luffs, aero.canopy_luffing carries its load on the tubes).
@@ -854,15 +854,15 @@ def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
 
 
 def test_at_10_mps_the_kite_flies_on_the_winch_from_its_wind_scaled_start():
-    """Issue 19's 10 m/s (turbulence 0.1) with the wing with inertia and the ground station reeling out in force
+    """10 m/s (turbulence 0.1) with the wing with inertia and the ground station reeling out in force
     control above 8 kN (the set force of sections 11 and 22; the default's 15 kN: the next test): from the default
     start at 4.4 times the wind (44 m/s) the first 6 s fly without a step made in halves,
     the tips keep their shape (tip distance above 4 m, against 5.2 m at the start) and after the start's 23 kN the
     winch holds the traction below 20 kN while it reels out (measured over 120 s: 3 figure-eights, 6.9-16.4 kN,
     docs/flight_model.md, section 22). From the old 22 m/s start (half the flight speed), the acceleration to 15 kN
-    folded the tips within 0.35 s at the structural damping before stop 42 (``rayleigh_beta_s`` 6.4e-4 s; linearised
-    at 0.17 s: +52 1/s; with ``M_a a`` alone, the added-mass force of then: with Theodorsen's force, the default since
-    stop 44, the tips hold at that damping too, 4.9 m); with the default's 2 % of critical at the wing's lowest mode
+    folded the tips within 0.35 s at a structural damping of ``rayleigh_beta_s`` 6.4e-4 s (linearised
+    at 0.17 s: +52 1/s; with ``M_a a`` alone as the added-mass force: with Theodorsen's force, the default,
+    the tips hold at that damping too, 4.9 m); with the default's 2 % of critical at the wing's lowest mode
     the tips hold (tip distance above 4.5 m over the first 2 s; section 36)."""
     from kite_env.config import load_config
     from kite_env.flight import fly
@@ -884,7 +884,7 @@ def test_at_10_mps_the_kite_flies_on_the_winch_from_its_wind_scaled_start():
 
 
 def test_at_10_mps_the_default_ground_station_keeps_the_wing_from_its_overload():
-    """Issue 19's 10 m/s (turbulence 0.1) with the defaults: the ground station holds the tether below its 15 kN limit
+    """10 m/s (turbulence 0.1) with the defaults: the ground station holds the tether below its 15 kN limit
     and reels out above it (dynamics.winch = "force", docs/flight_model.md, section 43). Over the first 8 s the tether
     force stays below 25 kN after the start, the tether reels out and the wing keeps its shape (tip distance above
     4.5 m; 4.94 m measured, 22.3 kN at most). On the paper's constant tether (dynamics.winch = "fixed") the same
@@ -938,7 +938,7 @@ def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
     assert np.linalg.norm(inertial.sum(axis=0)) > 150.0  # [N] (220 N along the turn's radius)
     assert np.linalg.norm((inertial + f)[sec].sum(axis=1), axis=1).max() < 1e-2 * per_section.max()
     assert np.linalg.norm((inertial + f).sum(axis=0)) < 2.0
-    assert base.structure.added_mass_force == "normal_velocity_rate"  # the default since stop 44
+    assert base.structure.added_mass_force == "normal_velocity_rate"  # the default
 
 
 def test_the_compiled_normal_rate_force_equals_the_numpy_reference():
@@ -1014,12 +1014,11 @@ def test_the_normal_rate_forces_tangent_matches_finite_differences():
 def test_the_wing_on_its_lines_carries_the_yaw_twist_mode_which_the_normal_rate_force_undamps():
     """kite_env.turn_rate.tethered_wing_yaw_response: the wing with inertia on its lines from a fixed KCU (30 m/s,
     kite angle 8 deg), at rest on them and kicked with 0.5 rad/s of yaw, oscillates at 3.7 Hz (the baseline flight's
-    3.9 Hz yaw/twist oscillation; held at A-D the wing shows none). With ``M_a a`` alone (``nodal_acceleration``, the
-    default before stop 44) it decays
-    (1.12 deg in the first half second, 0.26 deg at 2.5-3 s); with Theodorsen's normal-rate part
+    3.9 Hz yaw/twist oscillation; held at A-D the wing shows none). With ``M_a a`` alone (``nodal_acceleration``) it
+    decays (1.12 deg in the first half second, 0.26 deg at 2.5-3 s); with Theodorsen's normal-rate part
     (structure.added_mass_force = normal_velocity_rate) it does not (1.66, then 1.36-1.58 deg): that part feeds the
-    mode (docs/flight_model.md, sections 27-28). At the structural damping of those sections (``rayleigh_beta_s``
-    6.4e-4 s, the default before stop 42; the default's 1.6e-3 s damps the mode with either force, section 36)."""
+    mode (docs/flight_model.md, sections 27-28). At a structural damping of ``rayleigh_beta_s`` 6.4e-4 s (the
+    default's 1.6e-3 s damps the mode with either force, section 36)."""
     from kite_env.turn_rate import tethered_wing_yaw_response
 
     base = Config()
@@ -1041,10 +1040,10 @@ def test_the_linearised_rig_predicts_the_growth_of_its_yaw_mode():
     inflow), predicts the stepped rig's yaw mode: 3.59 Hz at 1.02 % of critical with ``M_a a`` alone,
     3.62 Hz at -2.19 % with the normal-rate force; the rig kicked with 0.05 rad/s decays at 1.16 % and grows at
     -2.0 %. With the Newton tangent's damping (the section damping on all of the velocity) the same mode is at 2.93
-    Hz and 15.8 %: what the first linearisation (stop 39) missed (docs/flight_model.md, section 28). At the
-    structural damping of that section (``rayleigh_beta_s`` 6.4e-4 s, the default before stop 42), where the mode
-    decays slowly enough for the rig's 3 s record to measure its rate (section 36), and with the trailing-edge hem of
-    then (co-rotational beams, ``te_hem_element=beam``; with the frame-free hem of stop 43 the linearisation and the
+    Hz and 15.8 %: what a linearisation with that damping misses (docs/flight_model.md, section 28). At a
+    structural damping of ``rayleigh_beta_s`` 6.4e-4 s, where the mode
+    decays slowly enough for the rig's 3 s record to measure its rate (section 36), and with the trailing-edge hem as
+    co-rotational beams (``te_hem_element=beam``; with the frame-free hem the linearisation and the
     rig differ by 0.53 % of critical with ``M_a a`` alone instead of under 0.5 %)."""
     from kite_env.turn_rate import tethered_wing_modes, tethered_wing_yaw_response
 

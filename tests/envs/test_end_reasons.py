@@ -1,4 +1,4 @@
-"""scripts/end_reasons.py (issue 20's count of why episodes end), with a stand-in ``kite-eval``.
+"""scripts/end_reasons.py (its count of why episodes end), with a stand-in ``kite-eval``.
 
 The script runs one ``kite-eval`` per episode (the executable next to ``sys.executable``). A stand-in written here
 answers each seed as the real one would: an episode's ``episodes.csv`` and exit 0, or, for a numerical failure of

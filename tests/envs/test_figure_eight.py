@@ -305,7 +305,7 @@ def test_a_start_does_not_depend_on_the_episodes_before_it():
 
 
 def test_a_numerical_failure_raises_with_the_wing_with_inertia_and_ends_the_quasi_static_wings_episode(monkeypatch):
-    """Issue 20: with the wing with inertia (the default) a step whose wing fails even when made in halves down to
+    """With the wing with inertia (the default) a step whose wing fails even when made in halves down to
     dt/16 raises NumericalFailure, naming the time and the episode's drawn conditions and carrying the solver's
     residual history: a bug, not an episode end. The paper's quasi-static wing, which has no state to carry it
     through a luffing canopy, ends its episode with "wing did not converge" as before."""
@@ -338,3 +338,37 @@ def test_a_numerical_failure_raises_with_the_wing_with_inertia_and_ends_the_quas
     monkeypatch.setattr(qs.sim.wing, "solve", fail)
     _, _, term, trunc, info = qs.step(np.zeros(1))
     assert term and not trunc and info["termination_reason"] == "wing did not converge"
+
+
+def test_fast_env_refuses_an_action_of_the_wrong_size_or_not_finite_and_changes_nothing():
+    """``step`` takes any array of one element (a scalar, (1,), (1, 1)) and clips it to [-1, 1]; an action of another
+    size raises ValueError "action must have one element", a NaN or infinite one ValueError "action must be finite",
+    both before anything is simulated: the episode then goes on as if they had not been sent."""
+    over = ["env.max_episode_s=1", "wind.turbulence_intensity=0.0"]
+    env = gym.make("KiteFigureEightFast-v1", overrides=over)
+    ref = gym.make("KiteFigureEightFast-v1", overrides=over)
+    obs, _ = env.reset(seed=3)
+    obs_ref, _ = ref.reset(seed=3)
+    np.testing.assert_array_equal(obs, obs_ref)
+    for bad in (np.zeros(2, dtype=np.float32), np.zeros((1, 2)), np.array([]), [0.1, 0.2]):
+        with pytest.raises(ValueError, match="action must have one element"):
+            env.step(bad)
+    for bad in (np.array([np.nan], dtype=np.float32), np.array([np.inf]), [-math.inf], math.nan):
+        with pytest.raises(ValueError, match="action must be finite"):
+            env.step(bad)
+    # one element in any shape is the same action; beyond the bounds it is clipped
+    for a, a_ref in ((np.float32(0.3), np.array([0.3], dtype=np.float32)), (np.array([[0.3]]), [0.3]),
+                     ([5.0], np.array([1.0], dtype=np.float32)), (-7.0, [-1.0])):
+        obs, r, term, trunc, info = env.step(a)
+        obs_ref, r_ref, *_ = ref.step(a_ref)
+        np.testing.assert_array_equal(obs, obs_ref)
+        assert r == r_ref and np.all(np.isfinite(obs)) and not term
+
+
+def test_fast_env_refuses_overrides_given_as_one_string():
+    """``gym.make(id, overrides="section.key=value")`` raises one ConfigError that asks for a list (a string would
+    otherwise be read character by character)."""
+    with pytest.raises(ConfigError, match="wrap a single override in a list"):
+        gym.make("KiteFigureEightFast-v1", overrides="env.max_episode_s=1")
+    env = gym.make("KiteFigureEightFast-v1", overrides=["env.max_episode_s=1"])
+    assert env.unwrapped.cfg.env.max_episode_s == 1.0

@@ -169,7 +169,7 @@ def _tube_energy(bs, props, update, x_e, R_e):
 @pytest.mark.parametrize("measure", tube.CURVATURE_MEASURES)
 def test_secant_tube_forces_are_the_gradient_of_a_stored_energy_only_with_the_element_energy_curvature(measure):
     # f = dU/dd with U = L0 (W(kappa) + W_t(phi)) + EA/2L0 (l - L0)^2: the element is elastic (conservative). The
-    # larger-end curvature of stops before 27 is no function of the element's energy: its forces are not a
+    # larger-end curvature (max_end) is no function of the element's energy: its forces are not a
     # gradient, and a free wing integrated with it gained energy from nothing
     bs, props, x_e, R_e, update = _tube_chain(measure)
     update(x_e, R_e)
