@@ -145,7 +145,7 @@ class FlightRecorder:
         meta = {
             "crashed": crashed, "termination_reason": termination_reason if crashed else "completed",
             "sim_time_s": float(series["t"][-1]), "wall_time_s": time.perf_counter() - self.t_wall0,
-            "dt_s": self.cfg.dynamics.dt_s, "control_dt_s": control_dt_s, "L_B0": sim.L_B0, "L_D0": sim.L_D0,
+            "dt_s": self.cfg.physics_dt_s, "control_dt_s": control_dt_s, "L_B0": sim.L_B0, "L_D0": sim.L_D0,
             "pair_stiffness_N_per_m": sim.pair_stiffness.tolist(), "n_sections": int(len(mesh.sections)),
             "design_tip_distance_m": float(np.linalg.norm(design[mesh.bridle[0]] - design[mesh.bridle[2]])),
             "design_bridle_y_m": self.design_bridle_y.tolist(),

@@ -335,3 +335,16 @@ def test_overrides_must_be_a_list_of_strings(overrides):
             load_config(None, overrides)
     with pytest.raises(ConfigError, match="override 8 must be a string"):
         load_config(None, [8])
+
+
+@pytest.mark.parametrize("dt", [0.015, 0.03, 0.0])
+def test_the_fast_fidelitys_step_must_divide_the_control_period(dt):
+    """sim.surrogate_dt_s: a whole number of fast-fidelity steps makes one control period (0.02 s); 0.01 s is the
+    default, two steps per control period, as the env's n_physics says."""
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+
+    with pytest.raises(ConfigError, match="sim.surrogate_dt_s"):
+        load_config(None, [f"sim.surrogate_dt_s={dt}"])
+    env = KiteFigureEightEnv(fidelity="surrogate")
+    assert env.n_physics == 2 and env.control_dt == pytest.approx(0.02)
+    assert KiteFigureEightEnv().n_physics == 4  # the full model's 5 ms

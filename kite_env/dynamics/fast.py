@@ -1,7 +1,7 @@
 """The fast fidelity: the particle system with the reduced-order wing, N kites advanced together as arrays.
 
 :class:`SurrogateKites` holds the states of ``n`` independent kites (rows of ``(n, 5, 3)`` arrays: A, B, C, D, KCU
-in W) and advances all of them by one RK4 step of ``dynamics.dt_s``. The particle system is the one of the full
+in W) and advances all of them by one RK4 step of ``sim.surrogate_dt_s``. The particle system is the one of the full
 model (:func:`kite_env.dynamics.kernels.particle_accelerations_into`, Sect. II.C, Eq. 10-13: masses, bridle lines, line
 drag, tip-pair dashpots, tether and tip constraints, projection after the step); only the wing differs:
 
@@ -31,8 +31,8 @@ from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, projec
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.fsi import WingSolution
-from kite_env.surrogate.fit import filter_gain
 from kite_env.structure.kernels import njit
+from kite_env.surrogate.fit import filter_gain
 from kite_env.wind import _turbulence_kernel
 
 _JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -476,16 +476,19 @@ class SurrogateKites:
 
     State (rows = kites): ``r``, ``v`` (n, 5, 3), ``t`` (n,), ``rest`` (n, 4) line rest lengths, ``pair_damping``
     (n, 4), ``tether_length`` and ``reel_speed`` (n,) of the ground station (``dynamics.winch``; the paper's constant
-    tether with ``fixed``, or below the force limit of ``force``), the wind of each kite (:meth:`set_wind`). After :meth:`evaluate` or :meth:`step`: ``Y`` (n, 17) the
-    wing outputs at the current states, ``X`` (n, 30) their inputs, ``R`` (n, 3, 3) frame K, ``wind`` (n, 5, 3),
-    ``tension``/``length`` (n, 4) of the bridle lines, ``tether_force`` (n,) [N] (constraint force at the start of
-    the last step), ``status`` (n,) (:data:`OK`, :data:`NON_FINITE`, :data:`OUTSIDE`).
+    tether with ``fixed``, or below the force limit of ``force``), the wind of each kite (:meth:`set_wind`). After
+    :meth:`evaluate` or :meth:`step`: ``Y`` (n, 17) the wing outputs at the current states, ``X`` (n, n_in) their
+    inputs, ``R`` (n, 3, 3) frame K, ``wind`` (n, 5, 3), ``tension``/``length`` (n, 4) of the bridle lines,
+    ``tether_force`` (n,) [N] (constraint force at the start of the last step), ``status`` (n,) (:data:`OK`,
+    :data:`NON_FINITE`, :data:`OUTSIDE`).
     """
 
-    def __init__(self, cfg, surrogate, q_design: np.ndarray, tip_lengths, n: int, envelope_margin: float = 0.1):
+    def __init__(self, cfg, surrogate, q_design: np.ndarray, tip_lengths, n: int, envelope_margin: float = 0.1,
+                 dt: float | None = None):
         if n < 1:
             raise ValueError(f"n must be at least 1, got {n}")
-        self.cfg, self.n, self.dt = cfg, int(n), cfg.dynamics.dt_s
+        self.cfg, self.n = cfg, int(n)
+        self.dt = cfg.sim.surrogate_dt_s if dt is None else float(dt)
         self.q_design = np.ascontiguousarray(q_design, dtype=float)
         self.tip_lengths = np.asarray(tip_lengths, dtype=float)
         dyn = cfg.dynamics
@@ -712,7 +715,7 @@ class SurrogateFlightSimulator(FlightSimulator):
         if start == "table_only" and self.start_table is None:
             raise ValueError("start 'table_only' needs a start table; the surrogate has none")
         self.start_mode = start if self.start_table is not None else "fe"
-        self.dt = cfg.dynamics.dt_s
+        self.dt = cfg.sim.surrogate_dt_s
         q0 = self.wing.design_bridle
         self.tip_lengths = np.array([np.linalg.norm(q0[0] - q0[1]), np.linalg.norm(q0[2] - q0[3])])
         self.kites = SurrogateKites(cfg, self.surrogate, q0, self.tip_lengths, 1)

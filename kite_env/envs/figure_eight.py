@@ -110,7 +110,8 @@ class KiteFigureEightEnv(gym.Env):
 
     ``Box(-1, 1, (1,), float32)``: desired ``dl* = l_B - l_D`` divided by ``control.delta_l_max_m`` (1.5 m by
     default). ``dl* < 0`` pulls the right steering line and turns the kite to its right. The action is held for
-    ``control.control_dt_s`` (0.02 s, four physics steps of ``dynamics.dt_s``); the steering actuator follows it at
+    ``control.control_dt_s`` (0.02 s: four physics steps of ``dynamics.dt_s`` in the full model, two of
+    ``sim.surrogate_dt_s`` in the fast fidelity); the steering actuator follows it at
     up to ``control.line_speed_max_mps`` (2 m/s). An action is one finite number (shape ``(1,)``, ``()`` or any
     shape with one element; anything else is a ``ValueError``); values beyond [-1, 1] are clipped to it.
 
@@ -208,8 +209,8 @@ class KiteFigureEightEnv(gym.Env):
         hi = np.concatenate([np.full(_TERM_SPECS[t][0], _TERM_SPECS[t][2]) for t in self.layout]).astype(np.float32)
         self.observation_space = spaces.Box(lo, hi, dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        self.n_physics = max(1, int(round(cfg.control.control_dt_s / cfg.dynamics.dt_s)))
-        self.control_dt = self.n_physics * cfg.dynamics.dt_s
+        self.n_physics = max(1, int(round(cfg.control.control_dt_s / cfg.physics_dt_s)))
+        self.control_dt = self.n_physics * cfg.physics_dt_s
         self.max_steps = int(math.ceil(cfg.env.max_episode_s / self.control_dt - 1e-9))
         ctrl = cfg.control if cfg.env.force_controller else dataclasses.replace(cfg.control, k3_m=0.0)
         self._ctrl_cfg = ctrl

@@ -22,7 +22,8 @@ def _path(kite_name: str, suffix: str, what: str) -> Path:
     path = DATA_DIR / f"{kite_name}{suffix}.npz"
     if not path.is_file():
         raise FileNotFoundError(f"no shipped reduced-order wing {what} for kite '{kite_name}' ({path} missing; "
-                                f"shipped kites: {_shipped() or 'none'}); make one with kite-fit (sample, fit, start-table)")
+                                f"shipped kites: {_shipped() or 'none'}); make one with kite-fit (sample, fit, "
+                                "start-table)")
     return path
 
 

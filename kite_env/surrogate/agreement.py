@@ -173,7 +173,8 @@ def agreement_table(result: dict) -> str:
         a, b = r["fe"], r["fast"]
         lines.append(f"| {r['flight']} | {a['traction_mean_N'] / 1e3:.2f} / {b['traction_mean_N'] / 1e3:.2f} | "
                      f"{100 * r['traction_rel']:+.1f} % | {a['tracking_rms_deg']:.2f} / {b['tracking_rms_deg']:.2f} | "
-                     f"{r['tracking_deg']:+.2f} | {a['figure_eights']} / {b['figure_eights']} | {a['end']} / {b['end']} "
+                     f"{r['tracking_deg']:+.2f} | {a['figure_eights']} / {b['figure_eights']} | "
+                     f"{a['end']} / {b['end']} "
                      f"| {'yes' if r['ok'] else 'no'} |")
     rnd = result["random"]
     lines += ["", f"| random steering, {rnd['episodes']} episodes of {rnd['duration_s']:g} s (seeds {rnd['seed']}-"

@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 #: the sections' angles of attack are fitted within +-ALPHA_BOUND [rad]: beyond it a section is stalled or, on a kite
 #: that falls back on a slack tether, blown from behind (alpha jumps by 2 pi at the rear); the reduced-order wing
 #: reports the bound there (its angles are diagnostics: the forces do not use them)
@@ -50,7 +49,8 @@ def history_names(taus=TAUS) -> tuple[str, ...]:
 
 
 def filter_gain(dt: float, tau: float) -> float:
-    """Gain of the exact discrete first-order low-pass over one step: ``z <- z + c (x - z)``, ``c = 1 - exp(-dt/tau)``."""
+    """Gain of the exact discrete first-order low-pass over one step: ``z <- z + c (x - z)``,
+    ``c = 1 - exp(-dt/tau)``."""
     return 1.0 - math.exp(-dt / tau)
 
 
@@ -287,7 +287,7 @@ def replay(arrays: dict, meta: dict, surrogate, start: int = 0, n_steps: int | N
     wind = WindField(cfg.wind)
     q0 = nominal_wing(cfg.kite.name, cfg).design_bridle
     tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
-    ks = SurrogateKites(cfg, surrogate, q0, tips, 1)
+    ks = SurrogateKites(cfg, surrogate, q0, tips, 1, dt=cfg.dynamics.dt_s)  # the tape's step
     ks.set_wind(0, wind)
     rest = arrays["rest"]
     place_kite(ks, arrays, start)
@@ -300,7 +300,7 @@ def replay(arrays: dict, meta: dict, surrogate, start: int = 0, n_steps: int | N
     return r, v, status
 
 
-# ---------------------------------------------------------------------------------------------------- data as demonstrator
+# ------------------------------------------------------------------------------------------ data as demonstrator
 def corrective_samples(arrays: dict, meta: dict, surrogate, cfg, q_design, tips, every: int = 100, horizon: int = 60,
                        omega: float = 20.0):
     """Samples at the states the fitted wing itself reaches along a recorded flight ("data as demonstrator",
@@ -320,7 +320,7 @@ def corrective_samples(arrays: dict, meta: dict, surrogate, cfg, q_design, tips,
     a = np.full_like(v, np.nan)
     a[1:-1] = (v[2:] - v[:-2]) / (t[2:] - t[:-2])[:, None, None]
     Xs, Ys = [], []
-    ks = SurrogateKites(run_cfg, surrogate, q_design, tips, 1)
+    ks = SurrogateKites(run_cfg, surrogate, q_design, tips, 1, dt=run_cfg.dynamics.dt_s)  # the tape's step
     ks.set_wind(0, wind)
     for s in range(1, len(t) - horizon - 1, every):
         place_kite(ks, arrays, s)

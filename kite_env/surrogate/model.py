@@ -123,7 +123,7 @@ class SurrogateWing:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "SurrogateWing":
+    def load(cls, path: str | Path) -> SurrogateWing:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"surrogate weights '{path}' do not exist")

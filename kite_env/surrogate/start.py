@@ -134,7 +134,7 @@ class StartTable:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "StartTable":
+    def load(cls, path: str | Path) -> StartTable:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"start table '{path}' does not exist")

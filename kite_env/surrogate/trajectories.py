@@ -1,4 +1,5 @@
-"""Flights of the full model recorded step by step, the data the reduced-order wing of the wing with inertia is fitted to.
+"""Flights of the full model recorded step by step: the data the reduced-order wing of the wing with inertia is
+fitted to.
 
 The wing with inertia (``structure.dynamic``) has a state of its own (1332 DOF, their rates, the downwash): the force
 it exerts on the bridle points A-D at a time depends on how it got there, not only on where A-D are. Its
@@ -218,9 +219,8 @@ def make_sampling_policy(spec: str, env, seed: int):
 
 def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = None):
     """Fly one planned episode of the full model; returns ``(arrays, meta)``."""
-    from kite_env.envs.figure_eight import KiteFigureEightEnv
-
     from kite_env.config import fingerprint
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
 
     env = KiteFigureEightEnv(overrides=[*base_overrides, *plan.overrides()])
     tape = tape or FlightTape()

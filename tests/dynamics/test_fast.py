@@ -148,7 +148,7 @@ def test_the_latent_filters_follow_the_inputs_as_in_the_fit(setup):
     _start(sim, path)
     ks = sim.kites
     assert ks.X.shape == (1, len(sw.input_names)) and ks.Z.shape == (1, len(sw.taus), n_sel)
-    np.testing.assert_array_equal(ks._gain, [filter_gain(cfg.dynamics.dt_s, tau) for tau in sw.taus])
+    np.testing.assert_array_equal(ks._gain, [filter_gain(cfg.sim.surrogate_dt_s, tau) for tau in sw.taus])
     assert np.all(ks.X[0, 30:] == 0.0)
     for j in range(len(sw.taus)):
         np.testing.assert_array_equal(ks.Z[0, j], ks.X[0, sel])
@@ -161,7 +161,7 @@ def test_the_latent_filters_follow_the_inputs_as_in_the_fit(setup):
         for j in range(len(sw.taus)):
             np.testing.assert_array_equal(X[-1][30 + j * n_sel:30 + (j + 1) * n_sel], z[j] - X[-1][sel])
     X = np.array(X)
-    H = latent_features(X[:, :30], cfg.dynamics.dt_s, sw.taus)
+    H = latent_features(X[:, :30], cfg.sim.surrogate_dt_s, sw.taus)
     assert np.abs(X[:, 30:]).max() > 1e-3  # a history that is not the steady one
     np.testing.assert_allclose(X[:, 30:], H, rtol=0.0, atol=1e-12 * np.abs(X[:, :30]).max())
     # the filters lag: the slow one further behind the inputs than the fast one
@@ -200,14 +200,14 @@ def test_the_ground_station_reels_out_as_in_the_full_model(setup):
                                                                  winch_time_constant_s=0.05))
     sim = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=sw, wing=wing, start="fe")
     _start(sim, path)
-    d = cfg.dynamics
+    d, dt = cfg.dynamics, cfg.sim.surrogate_dt_s  # the fast fidelity's step
     l_t, v_r = 80.0, 0.0
     for _ in range(40):
         rec = sim.step(sim.L_B0, sim.L_D0)
-        l_t += d.dt_s * v_r  # the step reels out at the speed set after the previous one
+        l_t += dt * v_r  # the step reels out at the speed set after the previous one
         v_step = v_r
         v_set = min(max((rec.tether_force - d.winch_force_N) / d.winch_damping_Ns_per_m, 0.0), d.winch_speed_max_mps)
-        v_r = v_set + (v_r - v_set) * np.exp(-d.dt_s / d.winch_time_constant_s)
+        v_r = v_set + (v_r - v_set) * np.exp(-dt / d.winch_time_constant_s)
         assert rec.tether_length == pytest.approx(l_t, abs=1e-12) and rec.reel_speed == pytest.approx(v_r, abs=1e-12)
         assert np.linalg.norm(rec.state.r[4]) == pytest.approx(l_t, abs=1e-9)
     assert rec.tether_length > 80.1 and 1.0 < rec.reel_speed < d.winch_speed_max_mps
@@ -298,7 +298,9 @@ def test_compiled_mlp_is_the_surrogate(setup, K_b):
     # the kernel's outputs along a flight are those of its own inputs (the kite placed by the fast fidelity's start)
     sim = SurrogateFlightSimulator(cfg, WindField(cfg.wind), surrogate=load_default(cfg.kite.name), wing=wing)
     _start(sim, path)
-    ks = SurrogateKites(cfg, sw, wing.design_bridle, sim.tip_lengths, 1)
+    # 20 steps of the fitted tapes' 5 ms: with the random K_b the wing is not the fitted one and leaves the envelope
+    # later, so the comparison stays at states of the sampled size (float32 round-off grows with the inputs)
+    ks = SurrogateKites(cfg, sw, wing.design_bridle, sim.tip_lengths, 1, dt=cfg.dynamics.dt_s)
     ks.set_wind(0, sim.wind)
     ks.set_kite(0, sim.state.r, sim.state.v, sim.t, sim.pair_stiffness, sim.L_B0, sim.L_D0)
     ks.evaluate()
