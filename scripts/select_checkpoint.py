@@ -1,21 +1,27 @@
 """Pick the checkpoint of a kite-train run to ship: the best mean return on validation seeds.
 
-    python scripts/select_checkpoint.py RUN_DIR [--episodes 200] [--seed 4000] [--every 1] [--min-steps 0]
-        [--ship agents/models/NAME] [--force]
+    python scripts/select_checkpoint.py RUN_DIR [--episodes 16] [--seed 30000] [--every 1] [--min-steps 0]
+        [--duration S] [--ship agents/models/NAME] [--force]
 
 Every checkpoint ``RUN_DIR/checkpoints/model_<N>_steps.zip`` (with its ``model_vecnormalize_<N>_steps.pkl``) flies
 ``--episodes`` episodes with deterministic actions in the run's own environment (``RUN_DIR/config.yml``: the
-training recipe's randomised wind, turbulence and start), episode ``i`` from ``reset(seed=seed + i)``; the paper's
-controller flies the same episodes for reference. The validation seeds (default 4000-4199) are disjoint from the
-held-out benchmark seeds (1000-1019, ``scripts/benchmark_agents.py``), the tests' seeds (2000-2011 and 3050-3199,
-``tests/agents/test_shipped.py``) and training (kite-train's own seeds and its evaluations, 10000 and up), so that
-the benchmark and the tests stay an honest test of the checkpoint chosen here. 200 episodes, because the returns
-spread by ~130 (most flights end within a few seconds): with 50 (seeds 3000-3049) the
-best of 60 checkpoints of an earlier PPO run led the baseline by 21.6 on them and by 2.2 on 200 others.
+training recipe's randomised wind, turbulence and start; ``--duration`` shortens its episodes), episode ``i`` from
+``reset(seed=seed + i)``; the paper's controller flies the same episodes for reference. The seeds of the project's
+evaluations are disjoint, so that each stays an honest test of the checkpoint chosen here:
+
+=============  ==================================================================
+0 - 9,999      kite-train's training episodes (``--seed`` and its env seeds)
+10,000 +       kite-train's periodic evaluations (``EvalCallback``)
+20,000 +       ``kite-train --optimize``'s validation of each trial
+30,000 +       this selection (default)
+50,000 +       the held-out evaluation in the full model (README, "Agents")
+70,000 +       the policy benchmark of the tests (tests/agents/test_policy_benchmark.py)
+=============  ==================================================================
 
 Prints one row per checkpoint (mean/std return, mean flight time, crashes) and writes ``RUN_DIR/selection.json``.
 ``--ship DIR`` copies the best checkpoint into ``DIR`` as ``model.zip`` + ``vecnormalize.pkl`` with the run's
-``config.yml``, ``args.yml``, ``command.txt`` and ``selection.json`` (what ``kite-eval --policy NAME`` loads).
+``model.json`` (the model it was trained on), ``config.yml``, ``args.yml``, ``command.txt`` and ``selection.json``
+(what ``kite-eval --policy NAME`` loads).
 """
 
 from __future__ import annotations
@@ -58,8 +64,9 @@ def validate(env, agent, seeds) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("run", type=Path, help="kite-train output folder (checkpoints/, config.yml)")
-    p.add_argument("--episodes", type=int, default=200)
-    p.add_argument("--seed", type=int, default=4000, help="first validation seed (default 4000)")
+    p.add_argument("--episodes", type=int, default=16)
+    p.add_argument("--seed", type=int, default=30000, help="first validation seed (default 30000)")
+    p.add_argument("--duration", type=float, default=None, help="episode length [s] (default: the run's)")
     p.add_argument("--every", type=int, default=1, help="validate every k-th checkpoint (default all)")
     p.add_argument("--min-steps", type=int, default=0, help="skip checkpoints before this many training steps")
     p.add_argument("--ship", type=Path, default=None, help="copy the best checkpoint into this folder")
@@ -83,7 +90,10 @@ def main(argv=None) -> int:
 
     cfg = load_config(cfg_path)
     # the run's environment as it trained: its randomised draws, its start rule, its episode length
-    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, randomize=True))
+    env_cfg = dataclasses.replace(cfg.env, randomize=True)
+    if args.duration is not None:
+        env_cfg = dataclasses.replace(env_cfg, max_episode_s=args.duration)
+    cfg = dataclasses.replace(cfg, env=env_cfg)
     env = KiteFigureEightEnv(config=cfg)
     seeds = range(args.seed, args.seed + args.episodes)
     rows = [{"checkpoint": "baseline", "steps": None, **validate(env, make_agent("baseline", env), seeds)}]
@@ -112,7 +122,7 @@ def main(argv=None) -> int:
         ckpt = args.run / best["model"]
         shutil.copy(ckpt, tmp / "model.zip")
         shutil.copy(checkpoint_vecnormalize(ckpt.parent, best["steps"]), tmp / "vecnormalize.pkl")
-        for name in ("config.yml", "args.yml", "command.txt", "selection.json"):
+        for name in ("model.json", "config.yml", "args.yml", "command.txt", "selection.json"):
             if (args.run / name).is_file():
                 shutil.copy(args.run / name, tmp / name)
         shutil.rmtree(args.ship, ignore_errors=True)

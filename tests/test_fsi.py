@@ -138,7 +138,7 @@ def test_time_steps_relax_to_the_static_equilibrium(nominal, damping, n_steps):
 
 def test_eq3_time_steps_fail_where_the_consistent_damping_relaxes(nominal):
     """The same 2 cm pull of B with Eq. (3) as printed: at the nominal state (C_M about the nose) its indefinite
-    damping makes the massless time step amplify trailing-edge modes (docs/flight_model.md, section 1) and the
+    damping makes the massless time step amplify trailing-edge modes (docs/model.md, "Aerodynamic damping") and the
     Newton solve of the step fails within the first steps, where the consistent damping relaxes (test above)."""
     wing, flight, sol, state = nominal
     cfg0 = wing.cfg

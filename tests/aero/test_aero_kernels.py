@@ -153,7 +153,8 @@ def test_thresholds_and_constants_equal_reference():
         cd, cm = lam[4] * a * a + lam[5], lam[6] * a * a + lam[7]
         got = kernels._lei_coefficients(math.radians(a_deg), t, kappa, 0.25, 0.25, 0)  # neg = 0: the regression
         np.testing.assert_allclose(got, (cl, cd, cm), rtol=1e-12, atol=1e-14)
-    # independent values: physics_facts.md 1.6 (t = 0.100, kappa = 0.095, quarter chord), 4 decimals
+    # independent values: Breukels' regression evaluated outside this package (tests/aero/test_breukels.py's
+    # TABLE_POLY: t = 0.100, kappa = 0.095, quarter chord), 4 decimals
     for a_deg, ref in ((-10.0, (-1.5413, 0.0781, -0.6336)), (0.0, (0.1417, 0.0427, 0.0705)),
                        (15.0, (1.8073, 0.1224, -1.5138))):
         np.testing.assert_allclose(kernels._lei_coefficients(math.radians(a_deg), 0.1, 0.095, 0.25, 0.25, 0), ref,

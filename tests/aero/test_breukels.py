@@ -14,9 +14,10 @@ from kite_env.aero.breukels import (
     poly_coefficients,
 )
 
-# Check table transcribed from /work/shared/reference/physics_facts.md section 1.6 ("Evaluated values (computed from
-# the table above)"; the constants C20..C62 come from awegroup/Vortex-Step-Method, OpenSourceAWE/VortexStepMethod.jl
-# and a LEI_airf_coeff thesis helper [S1-S3] there). t = 0.100, kappa = 0.095; columns alpha [deg], CL, CD, CM.
+# Check table: Breukels' (2011) LEI regression (the paper's Sect. II.B, after Eq. 9) evaluated independently of
+# kite_env.aero.breukels, with the constants C20..C62 of awegroup/Vortex-Step-Method,
+# OpenSourceAWE/VortexStepMethod.jl and a LEI_airf_coeff thesis helper ([S1-S3] of kite_env/aero/breukels.py).
+# t = 0.100, kappa = 0.095; columns alpha [deg], CL, CD, CM.
 TABLE_T, TABLE_KAPPA = 0.100, 0.095
 TABLE_LAMBDA = (-0.000322002, -0.000679965, 0.193694, 0.141663)  # lambda5..lambda8
 TABLE_POLY = np.array([
@@ -37,7 +38,7 @@ TABLE_FLAT = np.array([
     [45, 0.7071, 0.7071],
     [90, 0.0000, 2.0000],
 ])
-# second and third parameter sets of physics_facts 1.6: (t, kappa, lambda5..8, CL at 0,5,10,15,20 deg, CD at 0,10,20)
+# second and third parameter sets of the same evaluation: (t, kappa, lambda5..8, CL at 0,5,10,15,20 deg, CD at 0,10,20)
 TABLE_OTHER = [
     (0.080, 0.080, (-0.000305742, -0.000616058, 0.188669, 0.135703),
      (0.1357, 1.0254, 1.6550, 1.7952, 1.2167), (0.0405, 0.0752, 0.1793)),

@@ -1,4 +1,5 @@
-"""The static aeroelastic wing under mesh refinement (scripts/mesh_refinement.py; docs/flight_model.md, section 31).
+"""The static aeroelastic wing under mesh refinement (scripts/mesh_refinement.py; docs/validation.md, "Mesh refinement,
+L/D, the figure's elevation").
 
 Spanwise the default 37 sections are converged for what the flight uses; chordwise the wing's L/D falls as the
 canopy's billow is resolved: Eq. (6) takes the camber as the largest height of the section's nodes above its chord,
@@ -52,7 +53,8 @@ def test_spanwise_refinement_converges():
 
 
 def test_chordwise_refinement_resolves_more_camber_and_lowers_the_lift_to_drag_ratio():
-    """4 to 7 nodes per section (the meshes whose cold solve converges; docs section 31): the loaded mid-wing
+    """4 to 7 nodes per section (the meshes whose cold solve converges; docs/validation.md, "Mesh refinement, L/D,
+    the figure's elevation"): the loaded mid-wing
     camber of Eq. (6) grows and the wing's L/D falls at each refinement (measured: kappa 0.105, 0.119, 0.129, 0.129
     at the centre section; L/D 13.59, 12.71, 11.86, 11.57), while the unloaded camber is the design's 0.08."""
     ld, kappa = [], []
@@ -87,7 +89,8 @@ def test_a_cold_solve_whose_load_ramp_fails_is_made_again_with_a_finer_ramp():
     ramp of 6 steps passes through states without a stable equilibrium nearby and fails; the solve
     is made again from the unloaded wing with 12 steps, which reach the equilibrium (the same one a wing configured
     with 12 steps reaches); the default mesh needs no restart. With the default frame-free hem the 6 steps reach it
-    (docs/flight_model.md, section 37)."""
+    (docs/model.md, "The trailing-edge hem"; the restart: docs/validation.md, "Mesh refinement, L/D, the figure's
+    elevation")."""
     wing, sol = _solved(37, 8, "structure.te_hem_element=beam")
     assert [h["cold_restart"] for h in sol.history if "cold_restart" in h] == [12]
     _, rod = _solved(37, 8)

@@ -135,7 +135,8 @@ def test_e_y_is_continuous_when_the_mean_offset_turns_into_the_span():
     # A section of a slack canopy whose nodes are displaced sideways: its mean offset from the chord line turns
     # from the camber direction (e_z) into the span (e_y). The "plane" of chord and offset then contains the span,
     # and its normal crosses 90 deg from the LE tangent, where its orientation flips. e_y and the angle of attack
-    # must not jump there (a 12 deg jump of alpha made Newton cycle between the two sides; docs section 18).
+    # must not jump there (a 12 deg jump of alpha made Newton cycle between the two sides; docs/model.md,
+    # "Section frame, fold contact, rotary inertia").
     from kite_env.aero.loads import section_loads
     m, chord, mag = 6, 2.0, 0.01  # mean offset 0.5 % of the chord: a quarter into the flat-section blend
     s = np.linspace(0.0, chord, m)

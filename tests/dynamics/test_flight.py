@@ -119,7 +119,7 @@ def test_predictor_corrector_coupling_agrees_with_the_explicit_one():
     coupling error (the corrector solves the wing twice per step): both lie within 5 mm of the flight with a quarter
     of the step (1.25 ms) after 0.15 s, and the explicit coupling converges with the step (measured with the flying
     model's defaults: explicit 3.9 mm at 5 ms, 1.6 mm at 2.5 ms; predictor-corrector 4.2 mm at 5 ms, and 3.3 mm at
-    2.5 ms: it does not converge to the explicit limit, docs/flight_model.md "Noticed")."""
+    2.5 ms: it does not converge to the explicit limit, docs/model.md, "Open points")."""
     out = {}
     for coupling, dt in (("explicit", 0.005), ("predictor_corrector", 0.005), ("explicit", 0.0025),
                          ("explicit", 0.00125)):
@@ -237,7 +237,7 @@ def test_a_start_whose_cold_solve_fails_is_continued_from_a_faster_one():
     path): the cold solve of its wing (a load ramp from the unloaded wing) fails; the reset continues it from the same
     start flown 1.25 times faster, bringing the speed back in warm solves (FlightSimulator._start_by_continuation).
     Before, the env drew such a start again or, in kite-eval, stopped with "reset failed". The kite leaves at 17.6 m/s
-    and the first second flies (docs/flight_model.md, section 22)."""
+    and the first second flies (docs/environment.md, "Starts")."""
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config

@@ -101,8 +101,9 @@ def test_the_papers_configuration_flies_the_figure_and_turns_more_per_input_than
     """configs/paper.yaml (the paper's stated choices where they fly: the quasi-static wing, the von Karman canopy,
     Eq. 9 as printed, the rod tether, the proportional force loop, no actuator limit) flies 20 s of the baseline: no
     step made in halves, one figure-eight tracked within 3.5 deg RMS, and the heading turns faster per metre of input
-    than the quasi-static wing with the defaults (measured over 60 s: 149 against 77 deg/s per m; docs section 33;
-    the default wing with inertia 153, 125 with ``M_a a`` alone, section 38)."""
+    than the quasi-static wing with the defaults (measured over 60 s: 149 against 77 deg/s per m; docs/validation.md,
+    "The paper's choices"; the default wing with inertia 153, 125 with ``M_a a`` alone, docs/model.md,
+    "Theodorsen's force")."""
     from kite_env.metrics import compute_metrics
 
     cfg = load_config(PAPER)
@@ -121,7 +122,7 @@ def test_theodorsens_force_turns_the_held_kite_faster_than_the_added_mass_times_
     """The default added-mass force is Theodorsen's non-circulatory load: ``M_a a`` plus the normal-rate part
     that cancels it in a steady turn. ``M_a a`` alone pulls each section with its added mass times the turn's
     centripetal acceleration, as if the air turned with the wing, and the held kite turns slower: open loop at 5 m/s,
-    the force loop on, 2.18 / 2.06 against 1.78 / 1.69 rad/s per m at 0.1 / 0.3 m (docs/flight_model.md, section 38;
+    the force loop on, 2.18 / 2.06 against 1.78 / 1.69 rad/s per m at 0.1 / 0.3 m (docs/model.md, "Theodorsen's force";
     at the 0.2 m asserted here 2.23 against 1.81)."""
     cfg = load_config(None, [])
     assert cfg.structure.added_mass_force == "normal_velocity_rate"

@@ -1,5 +1,6 @@
 """Where a steering input goes (kite_env.turn_rate.steering_point_stiffness): the wing's linearised stiffness at the
-steering-line points along their lines, checked against the static aeroelastic solve (docs/flight_model.md, 26)."""
+steering-line points along their lines, checked against the static aeroelastic solve (docs/steering.md, "Where a
+steering input goes")."""
 
 import numpy as np
 import pytest
@@ -73,7 +74,7 @@ def test_the_paper_s_von_karman_canopy_is_softer_at_the_steering_point(loaded):
     """structure.membrane_kinematics=von_karman (the paper's kinematics, Sect. II.A): the tensioned canopy has no
     geometric stiffness against in-plane motion; the structure's stiffness at B with the loads held halves (measured:
     5.95 -> 2.71 kN/m), with the loads following the shape it falls by 30 % (9.95 -> 6.99 kN/m, share 0.31 -> 0.39;
-    docs/flight_model.md, section 29)."""
+    docs/steering.md, "The von Karman membrane")."""
     gl = loaded[3][0]
     wing, flight, _ = _loaded_wing("structure.membrane_kinematics=von_karman")
     vk = steering_point_stiffness(wing, flight, wing.kcu_position(), K_LINE)[0]
@@ -133,7 +134,7 @@ def test_a_quasi_steady_lateral_balance_predicts_the_open_loop_turn_rate_of_the_
     (measured 1.14 against 1.12 rad/s per m); the yaw moment against the yaw-rate damping alone would predict about
     five times as much, of the other sign: the kite turns towards its side force, the sideslip's weathervane moment
     sets the rate. The wing with inertia turns faster (1.71: its nodal and added mass are not in this massless
-    balance; docs/flight_model.md, section 27)."""
+    balance; docs/steering.md, "The open-loop turn rate")."""
     from kite_env.turn_rate import lateral_balance
 
     lb = lateral_balance(load_config(None, []), 25.0, np.deg2rad(8.0))
@@ -166,7 +167,8 @@ def test_the_von_karman_canopy_has_a_negative_stiffness_against_turning_the_whol
     """The loaded wing (25 m/s, kite angle 8 deg) turned rigidly: the Green-Lagrange canopy's energy does not change
     (its strain is invariant), the von Karman canopy's falls, a spurious stiffness of minus its tension against any
     turn of the wing from its reference frame (measured: yaw -6.9, pitch -8.6, roll -0.8 kN m/rad, about half the
-    wing's aerodynamic weathervane stiffness in yaw, 13 kN m/rad; docs section 34)."""
+    wing's aerodynamic weathervane stiffness in yaw, 13 kN m/rad; docs/steering.md, "The von Karman canopy against a
+    turn")."""
     gl, _, _ = _loaded_wing()
     vk, _, _ = _loaded_wing("structure.membrane_kinematics=von_karman")
     for axis in np.eye(3):

@@ -1,6 +1,7 @@
 """The wing with inertia (structure.dynamic, kite_env/dynamics/wing_dynamics.py): what holds so far.
 
-The default wing (docs/flight_model.md, sections 12-21). These tests check the integrator's pieces,
+The default wing (docs/model.md, "The wing with inertia"; checked in docs/validation.md, "Time-step convergence"
+and "Against the static wing"). These tests check the integrator's pieces,
 the linearised wing at the start of a flight and short flights.
 """
 
@@ -229,7 +230,7 @@ def test_nodal_damping_dissipates(dyn_flight):
     # the section damping is sampled and returned with the same weights: W^T C W (plus the structural beta K_T) has a
     # PSD symmetric part, so no
     # motion of the nodes draws energy from the air through the velocity terms (the TE-node flutter of
-    # docs/flight_model.md, section 12, came from sampling at 3/4 chord and spreading with the moment law)
+    # docs/model.md, "The wing with inertia", came from sampling at 3/4 chord and spreading with the moment law)
     sim, _ = dyn_flight
     load = _step_load(sim)
     _, C, _ = load.operators(sim.dyn.state)
@@ -336,7 +337,7 @@ def test_energy_over_1000_steps_without_dissipation(membrane_forces):
     density of this vacuum at 2e-12 instead of 1e-12 kg/m^3 the same code ran the 1000 steps with 0.022 J). The
     canopy is linear elastic here (wrinkling off): with the tension-field law's kinks the averaged forces gain 75 %
     of E0 within 0.3 s, and the discrete gradient's Newton iteration does not converge on a canopy that is slack all
-    over (docs/flight_model.md, section 15)."""
+    over (docs/model.md, "Energy")."""
     d, step, _ = _free_wing(1.0, wrinkling=False, membrane_forces=membrane_forces, tube_curvature="element_energy")
     wing = d.wing
     E0 = d.kinetic_energy() + wing.strain_energy(d.state)
@@ -365,7 +366,7 @@ def test_a_free_wrinkling_canopy_gains_no_energy_with_the_flights_structural_dam
     wing in vacuum, whose canopy is wrinkled and slack all over, gains energy from nothing: even with the flight's
     numerical damping (rho_inf 0.8) E grows from 2002 J and Newton fails within 0.3 s. The flight's structural
     damping (beta K_T, structure.rayleigh_beta_s, critical and above at those modes) removes the gain: over 2 s the
-    energy only falls (docs/flight_model.md, section 15)."""
+    energy only falls (docs/model.md, "Energy")."""
     beta = Config().structure.rayleigh_beta_s if rayleigh else 0.0
     d, step, _ = _free_wing(0.8, beta, tight=False, tube_curvature="element_energy")
     wing = d.wing
@@ -391,7 +392,7 @@ def test_time_integration_converges_at_second_order():
     """Generalized-alpha (rho_inf 0.8) is second order in dt: the free wing's mass-weighted RMS position error at
     5 ms against dt = 62.5 us falls by about 4 per halving (measured 4.3: 1.26e-6 to 2.9e-7 m from 250 to 125 us).
     Without the tension-field (wrinkling) law: its kinks (taut/wrinkled switches) make the motion non-smooth and
-    the observed order about 1 (docs/flight_model.md, section 14); at coarser steps the stiff trailing-edge modes
+    the observed order about 1 (docs/environment.md, "Random steering"); at coarser steps the stiff trailing-edge modes
     are not yet resolved (1.5-1.7 from 0.5 ms)."""
     pos = {}
     for dt in (2.5e-4, 1.25e-4, 6.25e-5):
@@ -430,8 +431,9 @@ def _baseline_flight(cfg, duration):
 
 
 def test_dynamic_wing_flies_the_baseline_with_taut_steering_lines():
-    # the first turn of the baseline figure-eight at the paper's 5 m/s (the 60 s flight: docs/flight_model.md,
-    # section 12); the released steering line, slack 12.6 % of the time on the quasi-static wing, stays taut
+    # the first turn of the baseline figure-eight at the paper's 5 m/s (the 60 s flight: docs/model.md,
+    # "The wing with inertia"); the released steering line, slack 12.6 % of the time on the quasi-static wing,
+    # stays taut
     cfg = dataclasses.replace(Config(), structure=dataclasses.replace(Config().structure, dynamic=True))
     _, recs = _baseline_flight(cfg, 3.0)
     assert all(r.substeps == 1 for r in recs)
@@ -480,9 +482,10 @@ def test_the_dynamic_flight_does_not_depend_on_the_time_step():
     2.5 and 10 ms against 5 ms. The step's held quantities (reference inflow, section damping, added mass,
     structural damping) are taken at the step's predicted end, where generalized-alpha takes the forces; held at its
     start they lag by one step and the KCU drifted along the path at first order (17 cm after 4 s, 39 cm after 8 s;
-    docs/flight_model.md, section 19). Each step's unbalanced Newton residual is carried into the next step
+    docs/validation.md, "Time-step convergence"). Each step's unbalanced Newton residual is carried into the next step
     (``structure.carry_residual``); dropped, the residuals add up to a force on the wing that differs with the step
-    (over 10 s up to 15 cm at 2.5 ms, where most steps stop at the first iterate below the tolerance; section 24)."""
+    (over 10 s up to 15 cm at 2.5 ms, where most steps stop at the first iterate below the tolerance;
+    docs/performance.md, "The carried residual")."""
     runs = {}
     for dt in (0.005, 0.01, 0.0025):
         base = Config()
@@ -620,7 +623,7 @@ def test_a_failed_step_retries_with_the_damping_tangent_of_its_own_start(monkeyp
     halves after it) assembles the tangent at its own start instead of taking the held one. (In the 10 m/s
     collapse on the constant tether the held tangent of the collapsing wing made every retry and half step fail:
     "wing did not converge" at 5.08 s; with the tangent assembled the kite reaches the ground at 7.88 s, a physical
-    end; docs/flight_model.md, section 36.)"""
+    end; docs/model.md, "Structural damping".)"""
     from kite_env.structure.solver import ConvergenceError
 
     cfg = Config()
@@ -719,8 +722,8 @@ def test_held_steering_turns_and_the_yaw_twist_oscillation_decays():
     early, late = (t > 0.6) & (t < 1.05), (t > 1.15) & (t <= 1.6)
     assert np.ptp(w[late]) < 0.8 * np.ptp(w[early])
     assert np.mean(w[t > 0.6]) < -0.2 and np.mean(w_qs[t > 0.6]) < -0.2  # the same direction, both turning
-    # with the wing's inertia the same input turns the kite faster (docs/flight_model.md, section 12: 93 against 61
-    # deg/s per m over the baseline flight)
+    # with the wing's inertia the same input turns the kite faster (docs/model.md, "The wing with inertia": 93 against
+    # 61 deg/s per m over the baseline flight)
     assert np.mean(w[t > 0.6]) < np.mean(w_qs[t > 0.6])
 
 
@@ -812,7 +815,7 @@ def test_a_slow_airspeed_ramp_follows_the_static_wing(case):
     structural mass times 1e-3, no added mass, no rotary inertia: 0.077 % and 2.7 mm, the step a damped static solve.
     ``40 to 55 m/s`` over 6 s (a 10 m/s kite's airspeeds): 0.065 % and 2.2 mm, no flutter (with the flight's reference
     inflow, the rigid fit of the nodes' velocities, the held trailing edge oscillated from 44 m/s and the light wing
-    from 22 m/s: docs/flight_model.md, section 20)."""
+    from 22 m/s: docs/validation.md, "Against the static wing")."""
     kw = {"default": {}, "mass -> 0": dict(structural_mass_scale=1e-3, added_mass_factor=0.0,
                                            rotary_inertia_factor=0.0),
           "40 to 55 m/s": dict(V0=40.0, V1=55.0, ramp_s=6.0)}[case]
@@ -832,8 +835,8 @@ def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
     again: its angle of attack below zero (the paper's Fig. 12: the released tip after a lobe) for a fifth of the
     time, down to -6 deg, its lift near zero (the canopy luffs, aero.canopy_luffing carries its load on the tubes).
     The flight goes on, without a step made in halves (measured over 15 s: 18.7 % of the time below zero, the
-    lift at 0.1 N; docs/flight_model.md, section 20). The quasi-static wing under the same input (rod tether) dips
-    to -0.8 deg, 1.7 % of 6 s."""
+    lift at 0.1 N; docs/validation.md, "Against the static wing"). The quasi-static wing under the same input (rod
+    tether) dips to -0.8 deg, 1.7 % of 6 s."""
     from agents.policies import ConstantAgent
     from kite_env.config import load_config
     from kite_env.flight import fly
@@ -885,9 +888,9 @@ def test_at_10_mps_the_kite_flies_on_the_winch_from_its_wind_scaled_start():
 
 def test_at_10_mps_the_default_ground_station_keeps_the_wing_from_its_overload():
     """10 m/s (turbulence 0.1) with the defaults: the ground station holds the tether below its 15 kN limit
-    and reels out above it (dynamics.winch = "force", docs/flight_model.md, section 43). Over the first 8 s the tether
-    force stays below 25 kN after the start, the tether reels out and the wing keeps its shape (tip distance above
-    4.5 m; 4.94 m measured, 22.3 kN at most). On the paper's constant tether (dynamics.winch = "fixed") the same
+    and reels out above it (dynamics.winch = "force", docs/model.md, "The ground station"). Over the first 8 s the
+    tether force stays below 25 kN after the start, the tether reels out and the wing keeps its shape (tip distance
+    above 4.5 m; 4.94 m measured, 22.3 kN at most). On the paper's constant tether (dynamics.winch = "fixed") the same
     flight pulls 36-42 kN at 72-77 m/s in its fourth and fifth second and the wing collapses (tip distance 0.84 m,
     the tether force below 0.6 kN from 5 s; the kite reaches the ground at 8.5 s over 120 s): measured, not flown
     here (27 s)."""
@@ -976,7 +979,8 @@ def test_the_normal_rate_forces_tangent_matches_finite_differences():
     """The tangent of Theodorsen's normal-rate force (structure.added_mass_force = normal_velocity_rate) in the step's
     Newton: its blocks ``-d f / d x`` and ``-d f / d v`` against central differences of the force, for a wing whose
     sections turn fast against the flow (a tumbling canopy: normals turned by up to 30 deg over a 0.3 ms step, 20
-    m/s of relative velocity). Without them, the step that ended seed 338 stalled (docs/flight_model.md, section 37)."""
+    m/s of relative velocity). Without them, the step that ended seed 338 stalled (docs/model.md, "The trailing-edge
+    hem")."""
     base = Config()
     cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure,
                                                                     added_mass_force="normal_velocity_rate"))
@@ -1017,8 +1021,9 @@ def test_the_wing_on_its_lines_carries_the_yaw_twist_mode_which_the_normal_rate_
     3.9 Hz yaw/twist oscillation; held at A-D the wing shows none). With ``M_a a`` alone (``nodal_acceleration``) it
     decays (1.12 deg in the first half second, 0.26 deg at 2.5-3 s); with Theodorsen's normal-rate part
     (structure.added_mass_force = normal_velocity_rate) it does not (1.66, then 1.36-1.58 deg): that part feeds the
-    mode (docs/flight_model.md, sections 27-28). At a structural damping of ``rayleigh_beta_s`` 6.4e-4 s (the
-    default's 1.6e-3 s damps the mode with either force, section 36)."""
+    mode (docs/steering.md, "The open-loop turn rate" and "The yaw rig"). Measured at a structural damping of
+    ``rayleigh_beta_s`` 6.4e-4 s (the default's 1.6e-3 s damps the mode with either force: docs/model.md,
+    "Structural damping")."""
     from kite_env.turn_rate import tethered_wing_yaw_response
 
     base = Config()
@@ -1040,11 +1045,11 @@ def test_the_linearised_rig_predicts_the_growth_of_its_yaw_mode():
     inflow), predicts the stepped rig's yaw mode: 3.59 Hz at 1.02 % of critical with ``M_a a`` alone,
     3.62 Hz at -2.19 % with the normal-rate force; the rig kicked with 0.05 rad/s decays at 1.16 % and grows at
     -2.0 %. With the Newton tangent's damping (the section damping on all of the velocity) the same mode is at 2.93
-    Hz and 15.8 %: what a linearisation with that damping misses (docs/flight_model.md, section 28). At a
+    Hz and 15.8 %: what a linearisation with that damping misses (docs/steering.md, "The yaw rig"). At a
     structural damping of ``rayleigh_beta_s`` 6.4e-4 s, where the mode
-    decays slowly enough for the rig's 3 s record to measure its rate (section 36), and with the trailing-edge hem as
-    co-rotational beams (``te_hem_element=beam``; with the frame-free hem the linearisation and the
-    rig differ by 0.53 % of critical with ``M_a a`` alone instead of under 0.5 %)."""
+    decays slowly enough for the rig's 3 s record to measure its rate (docs/model.md, "Structural damping"), and with
+    the trailing-edge hem as co-rotational beams (``te_hem_element=beam``; with the frame-free hem the linearisation and
+    the rig differ by 0.53 % of critical with ``M_a a`` alone instead of under 0.5 %)."""
     from kite_env.turn_rate import tethered_wing_modes, tethered_wing_yaw_response
 
     base = Config()

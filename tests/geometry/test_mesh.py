@@ -252,7 +252,7 @@ def test_kitemesh_validation_rejects_inconsistent_data():
         "beam_up": mesh.beam_up + mesh.nodes[mesh.beams[:, 1]] - mesh.nodes[mesh.beams[:, 0]],
         "section_width": mesh.section_width[:-1],
         "beam_kind": np.full(mesh.n_beams, 7),
-        "nodes": mesh.nodes * [1.0, -1.0, 1.0],  # section 0 would be the left tip
+        "nodes": mesh.nodes * [1.0, -1.0, 1.0],  # the section of index 0 would be the left tip
     }
     for key, value in bad.items():
         with pytest.raises(ValueError, match="KiteMesh 'rhino16'"):

@@ -1,6 +1,6 @@
 """The woven-fabric canopy (structure.canopy_shear_ratio): a balanced orthotropic plane-stress law with a low
 in-plane shear modulus, relaxed by tension-field theory for any material matrix
-(kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/flight_model.md, section 26)."""
+(kite_env.structure.shell_membrane.fabric_matrix, relaxed_general; docs/steering.md, "Where a steering input goes")."""
 
 import numpy as np
 import pytest

@@ -540,7 +540,8 @@ def test_a_tensioned_von_karman_membrane_loses_energy_when_turned_in_its_plane()
     """With a prestress the defect is a negative stiffness: an element stretched by ``e0`` along both axes and then
     turned in its plane by ``theta`` keeps its energy with Green-Lagrange; with von Karman its strain falls to
     ``(1 + e0) cos(theta) - 1`` and it loses energy while ``1 - cos(theta)`` is below about ``2 e0``: for small angles
-    a stiffness ``d2U/dtheta2 = -A0 h (sigma_xx + sigma_yy)`` against turning in its plane (docs section 34)."""
+    a stiffness ``d2U/dtheta2 = -A0 h (sigma_xx + sigma_yy)`` against turning in its plane (docs/steering.md, "The von
+    Karman canopy against a turn")."""
     X = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.15, 0.3, 0.0]])
     R = np.repeat(np.eye(3)[None], 3, axis=0)[None]
     e0 = 1e-3

@@ -1,11 +1,13 @@
-"""Breukels' inflated-tube correlations against the evaluated table of physics_facts.md 2.5."""
+"""Breukels' inflated-tube correlations (Breukels 2011; the paper's Sect. II.A, its ref. [9]) against a table of them
+evaluated independently of kite_env.structure.tube, with the constants C1..C19 of awegroup/kite_fem and
+awegroup/Billow."""
 
 import numpy as np
 import pytest
 
 from kite_env.structure import tube
 
-# p [bar], d [m], D=M_max, N, EI0, v_collapse, c1, c2, GJ0  (physics_facts.md 2.5)
+# p [bar], d [m], D=M_max, N, EI0, v_collapse, c1, c2, GJ0  (Breukels' correlations evaluated independently)
 TABLE = [
     (0.15, 0.112, 23.6, 251.0, 83.7, 0.0670, 55.12, 0.485, 26.7),
     (0.30, 0.160, 58.1, 864.7, 288.2, 0.0917, 79.54, 1.148, 91.3),
