@@ -1,43 +1,14 @@
-"""The flying full model against the one that failed: Eq. (3) as printed against the consistent section damping,
-on the model before it flew (the legacy model, main at cf16fc5), and the open-loop steering authority
-(kite_env.turn_rate)."""
+"""The flying full model's steering authority: open-loop turns (kite_env.turn_rate), the paper's configuration
+(configs/paper.yaml) flying the figure, and Theodorsen's added-mass force against ``M_a a`` alone."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from kite_env.config import config_from_dict, load_config
+from kite_env.config import load_config
 from kite_env.flight import fly
 from kite_env.turn_rate import open_loop_flight, turn_rate_table
-
-#: the model and task before the full model flew (formerly configs/legacy_v0.yaml, removed with the -v0 envs): the
-#: paper's choices where it states them (Eq. 3 as printed, omega x r at the LE node, Table 1's four point masses,
-#: the proportional force loop, the quasi-static wing, the rod tether of constant length) and the defaults of then
-#: where it does not
-LEGACY = {
-    "structure": {"tube_curvature": "max_end", "te_hem_element": "beam", "dynamic": False},
-    "aero": {"damping": "eq3", "rotation_point": "le_node", "cm_regression_ref_over_c": 0.25, "canopy_luffing": False,
-             "negative_alpha": "breukels", "induced_drag": False},
-    "dynamics": {"wing_point_mass_share": 1.0, "tether": "rod", "winch": "fixed"},
-    "control": {"line_speed_max_mps": 0.0, "k1_m_per_rad": 0.4, "k2": 1.0, "k3_m": 0.05, "k3i_per_s": 0.0,
-                "delta_l_max_m": 0.25},
-    "trajectory": {"width_deg": 120.0, "height_deg": 36.0, "elevation_deg": 30.0},
-}
-
-
-@pytest.mark.slow
-def test_consistent_damping_carries_the_legacy_flight_through_its_old_wing_failure():
-    """The legacy model ends in its first turn at 4.35 s with "wing did not converge" (the massless step with Eq. 3's
-    indefinite damping amplifies a trailing-edge mode). The same model with the consistent damping passes that
-    point and ends only on the ground (6.05 s, the figure's lobes reach down to 6.5 deg): a physical end."""
-    old = fly(config_from_dict(LEGACY), duration_s=5.0)
-    assert old.meta["termination_reason"] == "wing did not converge"
-    assert 4.0 < old.series["t"][-1] < 4.5
-    new = fly(config_from_dict({**LEGACY, "aero": {**LEGACY["aero"], "damping": "consistent"}}), duration_s=5.0)
-    assert new.meta["termination_reason"] in ("completed", "ground")  # no numerical end
-    assert new.series["t"][-1] > old.series["t"][-1] + 0.5
-    assert np.mean(new.series["newton_iters"]) < 2.0
 
 
 def test_held_steering_input_turns_the_kite_the_right_way_and_faster_with_more_input():
