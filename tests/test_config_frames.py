@@ -348,3 +348,80 @@ def test_the_fast_fidelitys_step_must_divide_the_control_period(dt):
     env = KiteFigureEightEnv(fidelity="surrogate")
     assert env.n_physics == 2 and env.control_dt == pytest.approx(0.02)
     assert KiteFigureEightEnv().n_physics == 4  # the full model's 5 ms
+
+
+# ---------------------------------------------------------------------------------------------------- key declarations
+def test_generated_config_reference_is_current():
+    """configs/default.yaml and docs/configuration.md are what kite_env.config_reference writes from the key
+    declarations now: a key added or changed without regenerating them fails here."""
+    from kite_env.config_reference import COMMAND, GENERATED
+
+    for path, render in GENERATED.items():
+        text = (ROOT / path).read_text() if (ROOT / path).is_file() else ""
+        assert text == render(), f"{path} is out of date with kite_env/config.py: run `{COMMAND}` and commit it"
+
+
+def test_every_key_is_declared_with_its_meaning_and_checks():
+    """Every key of the sections declared in kite_env/config.py carries its documentation (a meaning; a unit for
+    every number) and its default passes its own checks; every choice key's default is one of its choices; the
+    generated reference lists every key of every section."""
+    from dataclasses import fields
+
+    from kite_env.config import check_key
+    from kite_env.config_reference import _section_classes, section_keys
+
+    cfg = Config()
+    for sec, cls in _section_classes():
+        documented = {k.name: k for k in section_keys(sec, cls)}
+        assert set(documented) == set(cfg.to_dict()[sec]), sec
+        for k in documented.values():
+            assert k.doc, f"{sec}.{k.name} has no meaning"
+            if isinstance(k.default, (int, float)) and not isinstance(k.default, bool):
+                assert k.unit, f"{sec}.{k.name} has no unit"
+        if sec in ("wind", "trajectory"):  # declared in their modules, with their own validate()
+            continue
+        for f in fields(cls):
+            assert f.metadata.get("doc"), f"{sec}.{f.name} is not declared with kite_env.config.key"
+            check_key(f"{sec}.{f.name}", f.default, f.metadata)
+            if f.metadata["choices"] is not None:
+                assert f.default in f.metadata["choices"]
+
+
+def test_the_checks_read_from_the_declarations():
+    """A choice, a range, a check and .inf where allowed: the messages name the key and what it takes."""
+    with pytest.raises(ConfigError, match=r"'aero.negative_alpha' must be 'bounded' or 'breukels', got 'x'"):
+        load_config(None, ["aero.negative_alpha=x"])
+    with pytest.raises(ConfigError, match=r"'structure.carry_residual' must be 'sections', 'full' or 'none'"):
+        load_config(None, ["structure.carry_residual=some"])
+    with pytest.raises(ConfigError, match=r"'aero.moment_chord_power' must be 1 or 2, got 1.5"):
+        load_config(None, ["aero.moment_chord_power=1.5"])
+    with pytest.raises(ConfigError, match=r"'structure.canopy_nu' must lie in \(-1, 0.5\), got 0.5"):
+        load_config(None, ["structure.canopy_nu=0.5"])
+    with pytest.raises(ConfigError, match=r"'structure.rho_inf' must lie in \[0, 1\], got 1.1"):
+        load_config(None, ["structure.rho_inf=1.1"])
+    with pytest.raises(ConfigError, match=r"'fsi.max_retries' must be >= 0, got -1"):
+        load_config(None, ["fsi.max_retries=-1"])
+    with pytest.raises(ConfigError, match=r"'kite.n_sections' must be odd and >= 7, got 36"):
+        load_config(None, ["kite.n_sections=36"])
+    with pytest.raises(ConfigError, match=r"'kite.n_chord' must be >= 3, got 2"):
+        load_config(None, ["kite.n_chord=2"])
+    with pytest.raises(ConfigError, match=r"'env.observation' must list distinct terms of position, heading"):
+        load_config(None, ["env.observation=position,position"])
+    assert load_config(None, ["env.start_curvature_max=.inf"]).env.start_curvature_max == float("inf")
+    with pytest.raises(ConfigError, match=r"'env.max_episode_s' must be finite"):
+        load_config(None, ["env.max_episode_s=.inf"])
+    with pytest.raises(ConfigError, match=r"'env.start_curvature_max' must be positive"):
+        load_config(None, ["env.start_curvature_max=0"])
+
+
+def test_the_yaml_values_read_back_as_the_defaults():
+    """configs/default.yaml holds each default as a YAML value of its own type (1.25e+9 a float, not the string
+    '1.25e9' that YAML 1.1 reads), so that the file reads back as the defaults without conversion."""
+    from kite_env.config_reference import yaml_value
+
+    data = yaml.safe_load((ROOT / "configs" / "default.yaml").read_text())
+    for sec, vals in Config().to_dict().items():
+        for k, v in vals.items():
+            assert type(data[sec][k]) is type(v) and data[sec][k] == v, f"{sec}.{k}"
+    for v in (1.25e9, 8e-5, 15000.0, 0.0016, 1e-12, -3.5e20, float("inf"), "", "a: b", "true", 0, True):
+        assert yaml.safe_load(yaml_value(v)) == v, v
