@@ -1,8 +1,8 @@
 """Steering-line actuation: the K2 loops of the steering controller and the force controller (Bosch et al., Sect. III).
 
 The steering controller of the paper has two levels. The outer level turns the heading error into a desired
-steering-line length difference ``dl* = K1 (psi* - psi)`` (Eq. 15; :mod:`agents.baseline`, and the action of the
-Gymnasium environment). The inner level, implemented here, sets the rest lengths of the right (B) and left (D)
+steering-line length difference ``dl* = K1 (psi* - psi)`` (Eq. 15; :mod:`kite_env.policies.baseline`, and the action
+of the Gymnasium environment). The inner level, implemented here, sets the rest lengths of the right (B) and left (D)
 steering-line springs from the error of the actual difference ``dl = l_B - l_D`` (Eq. 16-17), and the force
 controller adds the same increment to both (Eq. 18-19):
 

@@ -2,7 +2,7 @@
 
 Every evaluation goes through the Gymnasium environment :class:`kite_env.envs.figure_eight.KiteFigureEightEnv`
 (wind, figure-eight, flight model, line actuator of Eq. 16-19) and a policy with Stable-Baselines3's ``predict``
-interface (the paper's controller :class:`agents.baseline.BaselineAgent`, a trained model, random or constant
+interface (the paper's controller :class:`kite_env.policies.baseline.BaselineAgent`, a trained model, random or constant
 actions). :func:`run_episode` flies one episode; :class:`FlightRecorder`, attached to the environment, logs every
 physics step; :func:`fly` is the short form for one episode at the configured conditions (wind section as it is,
 start at the crossing of the figure-eight, :func:`evaluation_config`).
@@ -62,11 +62,10 @@ import numpy as np
 
 from kite_env.config import Config
 from kite_env.dynamics.simulator import FlightSimulator, StepRecord
+from kite_env.envs.figure_eight import KiteFigureEightEnv
 from kite_env.frames import kite_frame, to_frame
+from kite_env.policies.baseline import BaselineAgent
 from kite_env.trajectory import Lemniscate, azimuth, course_angle, elevation, heading_angle
-
-#: the flight ends as crashed when the KCU comes closer to the ground than this elevation [rad]
-GROUND_ELEVATION_RAD = math.radians(3.0)
 
 
 @dataclass
@@ -210,18 +209,14 @@ def run_episode(env, agent, seed: int | None = None, options: dict | None = None
 def fly(cfg: Config, policy=None, duration_s: float | None = None, progress: Callable[[float], None] | None = None,
         wing=None) -> FlightLog:
     """Fly ``policy`` (an agent with SB3's ``predict``; None: the paper's controller,
-    :class:`agents.baseline.BaselineAgent`) for ``duration_s`` (None: ``sim.duration_s``) at the configured wind,
-    from the crossing of the figure-eight, through the Gymnasium environment (one evaluation path for every
-    policy). ``progress(t)`` is called after every control period. Returns the log; a wing that stops converging,
-    a slack tether or a kite that reaches the ground ends the flight early with ``meta['crashed']`` and
+    :class:`kite_env.policies.baseline.BaselineAgent`) for ``duration_s`` (None: ``sim.duration_s``) at the
+    configured wind, from the crossing of the figure-eight, through the Gymnasium environment (one evaluation path
+    for every policy). ``progress(t)`` is called after every control period. Returns the log; a wing that stops
+    converging, a slack tether or a kite that reaches the ground ends the flight early with ``meta['crashed']`` and
     ``meta['termination_reason']``. ``wing``: an :class:`~kite_env.fsi.AeroelasticWing` to reuse.
     """
-    from kite_env.envs.figure_eight import KiteFigureEightEnv
-
     env = KiteFigureEightEnv(config=evaluation_config(cfg, duration_s), wing=wing)
     if policy is None:
-        from agents.baseline import BaselineAgent
-
         policy = BaselineAgent(env.cfg, env.path)
     log, _ = run_episode(env, policy, progress=progress)
     env.close()

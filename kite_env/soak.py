@@ -24,8 +24,8 @@ import numpy as np
 
 def _episodes(args) -> list[dict]:
     fidelity, seeds, duration, overrides = args
-    from agents.policies import RandomAgent
     from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.policies import RandomAgent
     from kite_env.surrogate.agreement import RANDOM_CONDITIONS
 
     env = KiteFigureEightEnv(overrides=[*RANDOM_CONDITIONS, f"env.max_episode_s={duration}", *overrides],

@@ -69,7 +69,7 @@ def _mean(rows: list[dict], key: str) -> float | None:
 
 def benchmark_row(label: str, spec: str, fidelity: str, metrics: dict) -> dict:
     """One row of the benchmark from a kite-eval run's ``metrics.json`` dict."""
-    from agents.policies import model_path
+    from kite_env.policies import model_path
 
     rows = metrics.get("episode_rows") or [metrics]
     model = model_path(spec)
@@ -225,9 +225,9 @@ def main(argv=None) -> int:
     p.add_argument("--learning-curves", nargs="+", type=Path, default=None, metavar="RUN_DIR",
                    help="kite-train run folders to plot into OUT/learning_curves.png")
     args = p.parse_args(argv)
-    from agents.policies import SHIPPED, shipped_model
     from kite_env.cli.train import UsageError
     from kite_env.config import ConfigError
+    from kite_env.policies import SHIPPED, shipped_model
 
     out = args.out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

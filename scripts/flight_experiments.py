@@ -32,10 +32,10 @@ import numpy as np
 
 
 def _setup(overrides):
-    from agents.baseline import BaselinePolicy
     from kite_env.config import load_config
     from kite_env.control import LineActuator
     from kite_env.dynamics.simulator import FlightSimulator
+    from kite_env.policies.baseline import BaselinePolicy
     from kite_env.trajectory import Lemniscate
     from kite_env.wind import WindField
 

@@ -83,10 +83,10 @@ def main(argv=None) -> int:
     if args.ship is not None and args.ship.exists() and not args.force:
         p.error(f"'{args.ship}' exists (use --force to replace it)")
 
-    from agents.policies import load_model_agent, make_agent
     from kite_env.cli.train import checkpoint_vecnormalize
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.policies import load_model_agent, make_agent
 
     cfg = load_config(cfg_path)
     # the run's environment as it trained: its randomised draws, its start rule, its episode length

@@ -23,10 +23,10 @@ import sys
 def main(argv=None) -> int:
     import numpy as np
 
-    from agents.baseline import BaselineAgent
     from kite_env.config import ConfigError, load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config
+    from kite_env.policies.baseline import BaselineAgent
     from kite_env.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

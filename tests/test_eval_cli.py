@@ -71,10 +71,10 @@ def test_unknown_policy_lists_valid_ones(tmp_path, capsys):
 
 @pytest.mark.parametrize("args", [["--policy", "ppo"], ["--compare", "baseline", "sac"]])
 def test_shipped_name_without_model_is_one_clear_error(tmp_path, capsys, monkeypatch, args):
-    import agents.policies
+    import kite_env.policies
 
     models = tmp_path / "models"
-    monkeypatch.setattr(agents.policies, "MODELS_DIR", models)
+    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", models)
     name = args[-1]
     assert main([*args, "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -109,14 +109,14 @@ def test_every_policy_flies_the_one_env_of_the_command(shipped_ppo, tmp_path, mo
     """``--policy ppo`` loads agents/models/ppo/model.zip with its normalisation; ``--compare`` flies it and every
     other policy in the one env of --config and --set (not the config of the agent's training run), and the table
     names that env."""
-    import agents.policies
+    import kite_env.policies
 
-    monkeypatch.setattr(agents.policies, "MODELS_DIR", shipped_ppo)
+    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", shipped_ppo)
     monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])  # figures: tested above
     env = kite_env.envs.figure_eight.KiteFigureEightEnv(overrides=["env.max_episode_s=0.2"], fidelity="surrogate")
-    agent = agents.policies.make_agent("ppo", env)
+    agent = kite_env.policies.make_agent("ppo", env)
     assert agent.obs_norm is not None and agent.model.num_timesteps == 16
-    assert agents.policies.policy_label("ppo") == "ppo"
+    assert kite_env.policies.policy_label("ppo") == "ppo"
     out = tmp_path / "cmp"
     assert main(["--compare", "ppo", "random", "--episodes", "2", "--duration", "0.1", "--set", "sim.warmup_s=0.02",
                  "--fidelity", "surrogate", "--out", str(out), "--quiet"]) == 0
@@ -134,9 +134,9 @@ def test_every_policy_flies_the_one_env_of_the_command(shipped_ppo, tmp_path, mo
 
 
 def test_an_agent_of_another_model_is_refused_naming_the_keys(shipped_ppo, tmp_path, capsys, monkeypatch):
-    import agents.policies
+    import kite_env.policies
 
-    monkeypatch.setattr(agents.policies, "MODELS_DIR", shipped_ppo)
+    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", shipped_ppo)
     out = tmp_path / "x"
     assert main(["--policy", "ppo", "--set", "control.delta_l_max_m=0.25", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -285,7 +285,7 @@ def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
 def test_a_random_episode_does_not_depend_on_the_episodes_before_it():
     """RandomAgent is reseeded with each episode's seed by run_episode: episode 1 of a run is the episode flown
     alone with its seed (scripts/end_reasons.py splits its episodes over processes by seed)."""
-    from agents.policies import RandomAgent
+    from kite_env.policies import RandomAgent
 
     def returns(seeds):
         env = kite_env.envs.figure_eight.KiteFigureEightEnv(overrides=["env.max_episode_s=0.3"], fidelity="surrogate")

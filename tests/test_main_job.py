@@ -35,11 +35,11 @@ TODAY = {
 
 @pytest.fixture(scope="module")
 def baseline_60s():
-    from agents.policies import make_agent
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config, run_episode
     from kite_env.metrics import compute_metrics, paper_comparison
+    from kite_env.policies import make_agent
 
     cfg = load_config(None, ["sim.duration_s=60.0"])  # kite-eval --duration 60
     env = KiteFigureEightEnv(config=evaluation_config(cfg))

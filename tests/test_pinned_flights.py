@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.policies import make_agent
 from kite_env.envs.figure_eight import KiteFigureEightEnv
+from kite_env.policies import make_agent
 
 #: fidelity, control steps, (final KCU position [m], final tether force [N], sum of rewards)
 PINNED = {

@@ -23,8 +23,8 @@ from kite_env.config import ConfigError
 def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe", config=None) -> dict:
     """Time ``n_steps`` env steps of KiteFigureEight-v1 in ``fidelity`` driven by the baseline agent (``config``: a
     YAML path or None for the defaults, then ``overrides``)."""
-    from agents.baseline import BaselineAgent
     from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.policies.baseline import BaselineAgent
 
     env = KiteFigureEightEnv(config=config, overrides=overrides, fidelity=fidelity)
     agent = BaselineAgent(env.cfg)

@@ -9,7 +9,7 @@ Examples::
 
 Every policy flies through the Gymnasium environment ``KiteFigureEight-v1`` (:func:`kite_env.flight.run_episode`):
 ``baseline`` (the paper's controller), ``random``, ``constant:<a>`` (a normalised action in [-1, 1]) or the path
-of a model saved by ``kite-train`` (:mod:`agents.policies`). By default an episode flies the configured conditions
+of a model saved by ``kite-train`` (:mod:`kite_env.policies`). By default an episode flies the configured conditions
 (the ``wind`` section as it is, start at the crossing of the figure-eight, ``env.randomize = false``); episode ``i``
 uses the turbulence realisation ``seed + i`` (``--seed``, default ``wind.seed``) and ``reset(seed=seed + i)``.
 ``--randomize`` draws wind and start as in training instead (the ``env`` section's ranges).
@@ -63,7 +63,7 @@ from kite_env.config import FIDELITIES
 PROG = "kite-eval"
 
 
-#: policies by name; a model file path and ``constant:<value>`` are accepted too (:mod:`agents.policies`)
+#: policies by name; a model file path and ``constant:<value>`` are accepted too (:mod:`kite_env.policies`)
 POLICIES = ("baseline", "random", "constant:<value>", "ppo", "sac", "<path to model.zip>")
 #: per-episode columns of ``episodes.csv`` / ``episode_rows`` taken from the episode's metrics
 EPISODE_METRICS = ("sim_time_s", "crashed", "termination_reason", "figure_eights_completed", "tracking_error_rms_deg",
@@ -202,14 +202,14 @@ class _Job:
 
 def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
     """Config, environment and agent for ``spec``; raises ConfigError / PolicyError / ValueError on bad input."""
-    from agents.policies import make_agent
     from kite_env.config import ConfigError, load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config
     from kite_env.geometry import KITES
+    from kite_env.policies import make_agent
 
     # every policy flies the one env of --config and --set; an agent trained on another model is refused
-    # (agents.policies.load_model_agent, naming the keys that differ)
+    # (kite_env.policies.load_model_agent, naming the keys that differ)
     cfg = load_config(args.config, overrides)
     if cfg.kite.name not in KITES:
         raise ConfigError(f"config key 'kite.name': unknown kite {cfg.kite.name!r} (valid: {', '.join(sorted(KITES))})")
@@ -335,7 +335,7 @@ def compare_table(results: list[tuple[str, dict]], header: str = "") -> tuple[st
 
 
 def _labels(specs: list[str]) -> list[str]:
-    from agents.policies import SHIPPED, policy_label
+    from kite_env.policies import SHIPPED, policy_label
 
     out: list[str] = []
     for spec in specs:
@@ -367,7 +367,7 @@ def main(argv=None) -> int:
         overrides.append(f"sim.fidelity={args.fidelity}")
     if args.config is not None and not Path(args.config).is_file():
         return _fail(f"--config file {args.config!r} does not exist")
-    from agents.policies import SHIPPED
+    from kite_env.policies import SHIPPED
 
     specs = list(args.compare) if args.compare else [args.policy]
     jobs: list[_Job] = []

@@ -21,7 +21,6 @@ from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_
 from kite_env.control import LineActuator
 from kite_env.dynamics.simulator import FlightSimulator, NumericalFailure, SimulationError, StepRecord, make_simulator
 from kite_env.envs.observe import FEATURES, N_PARTS, Observer
-from kite_env.flight import GROUND_ELEVATION_RAD
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
 
@@ -37,6 +36,8 @@ _TERM_SPECS = {
     "rates": (4, -10.0, 10.0),  # angular velocity on the sphere (x_s, y_s) [rad/s], yaw rate [rad/s], speed / 25 m/s
     "actuator": (3, -5.0, 5.0),  # last action, actual (l_B - l_D) / dl_max, force ratio mu
 }
+#: an episode ends as crashed when the KCU comes closer to the ground than this elevation [rad]
+GROUND_ELEVATION_RAD = math.radians(3.0)
 V_SCALE_MPS = 25.0  # (literal 25.0 in kite_env.envs.observe.observe_kites)
 #: the features of ``info`` (all of :data:`kite_env.envs.observe.FEATURES` but the last, ``tracking``)
 INFO_FEATURES = FEATURES[:-1]

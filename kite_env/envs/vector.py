@@ -38,9 +38,14 @@ from gymnasium.vector.utils import batch_space
 from kite_env.config import Config
 from kite_env.control import actuate, force_integral, force_ratio_error
 from kite_env.dynamics.fast import NON_FINITE, OK, SurrogateKites
-from kite_env.envs.figure_eight import INFO_FEATURES, KiteFigureEightEnv, resolve_config, reward_terms
+from kite_env.envs.figure_eight import (
+    GROUND_ELEVATION_RAD,
+    INFO_FEATURES,
+    KiteFigureEightEnv,
+    resolve_config,
+    reward_terms,
+)
 from kite_env.envs.observe import FEATURES, N_PARTS
-from kite_env.flight import GROUND_ELEVATION_RAD
 
 #: per-kite rows of SurrogateKites copied from a single env's simulator after its reset
 _KITE_ROWS = ("r", "v", "t", "rest", "pair_damping", "wind_f", "wind_i", "wavevec_t", "phase0", "omega_m", "amp",

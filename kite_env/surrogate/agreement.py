@@ -66,11 +66,11 @@ def fly_case(args) -> dict:
 def random_episode(args) -> dict:
     """One random-steering episode (``(overrides, seed, duration_s)``): how and when it ended."""
     overrides, seed, duration = args
-    from agents.policies import RandomAgent
     from kite_env.config import load_config
     from kite_env.dynamics.simulator import NumericalFailure
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import run_episode
+    from kite_env.policies import RandomAgent
 
     cfg = load_config(None, [*overrides, f"env.max_episode_s={duration}", "env.randomize=true"])
     env = KiteFigureEightEnv(config=cfg)

@@ -207,7 +207,7 @@ def start_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
 
 def make_sampling_policy(spec: str, env, seed: int):
     """The policy of an :class:`EpisodePlan` for ``env``."""
-    from agents.policies import make_agent
+    from kite_env.policies import make_agent
 
     rng = np.random.default_rng(seed)
     if spec.startswith("baseline+held:"):

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import yaml
 
-import kite_env.plots
 from kite_env.config import config_from_dict, preset_name
 
 ZOO_HEADER = "| algo | env_id | mean_reward | std_reward | n_timesteps | eval_episodes |"
@@ -25,11 +24,11 @@ def test_tiny_benchmark_writes_the_zoo_table(bench, tmp_path, monkeypatch, capsy
     """baseline and random (and 'sac', not shipped: left out with a warning) on one held-out episode each in the
     fast fidelity of the default model, in the shipped PPO recipe's randomised conditions: the zoo table's rows are
     kite-eval's numbers, under the env id of that fidelity (KiteFigureEightFast-v1)."""
-    import agents.policies
+    import kite_env.policies
     from kite_env.cli.train import default_recipe
     from kite_env.envs import FAST_ENV_ID
 
-    monkeypatch.setattr(agents.policies, "MODELS_DIR", tmp_path / "no_models")  # 'sac' is not shipped: left out
+    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", tmp_path / "no_models")  # 'sac' is not shipped: left out
     monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
     out = tmp_path / "bench"
     assert bench.main(["--out", str(out), "--policies", "baseline", "random", "sac", "--episodes", "1",

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.baseline import BaselinePolicy
 from kite_env.config import ConfigError, ControlConfig, config_from_dict
 from kite_env.control import LineActuator
+from kite_env.policies.baseline import BaselinePolicy
 from kite_env.trajectory import Lemniscate, TrajectoryConfig, heading_angle, sphere_basis
 
 

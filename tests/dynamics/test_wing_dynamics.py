@@ -408,7 +408,7 @@ def test_time_integration_converges_at_second_order():
 
 def _baseline_flight(cfg, duration):
     from kite_env.control import LineActuator
-    from agents.baseline import BaselinePolicy
+    from kite_env.policies.baseline import BaselinePolicy
     from kite_env.trajectory import Lemniscate
     from kite_env.wind import WindField
 
@@ -832,7 +832,7 @@ def test_a_held_steering_input_luffs_the_inner_tip_and_the_flight_goes_on():
     tether) dips to -0.8 deg, 1.7 % of 6 s."""
     from kite_env.config import load_config
     from kite_env.flight import fly
-    from agents.policies import ConstantAgent
+    from kite_env.policies import ConstantAgent
 
     cfg = load_config(overrides=["structure.dynamic=true", "dynamics.tether=rope", "control.line_speed_max_mps=2"])
     log = fly(cfg, ConstantAgent(0.5), duration_s=6.0)

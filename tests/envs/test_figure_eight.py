@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import kite_env  # noqa: F401  (registers the environments)
-from agents.baseline import BaselineAgent
 from kite_env.config import ConfigError
 from kite_env.envs.figure_eight import KiteFigureEightEnv
+from kite_env.policies.baseline import BaselineAgent
 
 # the ends of an episode of the default wing with inertia: a numerical failure raises NumericalFailure instead
 VALID_REASONS = {"ground", "slack tether", "time limit"}
