@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
+import kite_env.plots
+import kite_env.policies
 from kite_env.config import config_from_dict, preset_name
 
 ZOO_HEADER = "| algo | env_id | mean_reward | std_reward | n_timesteps | eval_episodes |"
@@ -24,7 +26,6 @@ def test_tiny_benchmark_writes_the_zoo_table(bench, tmp_path, monkeypatch, capsy
     """baseline and random (and 'sac', not shipped: left out with a warning) on one held-out episode each in the
     fast fidelity of the default model, in the shipped PPO recipe's randomised conditions: the zoo table's rows are
     kite-eval's numbers, under the env id of that fidelity (KiteFigureEightFast-v1)."""
-    import kite_env.policies
     from kite_env.cli.train import default_recipe
     from kite_env.envs import FAST_ENV_ID
 
