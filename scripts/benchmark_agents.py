@@ -201,7 +201,7 @@ def plot_learning_curves(runs: list[Path], out_png: Path) -> list[str]:
 
 def recipe_env(recipe: Path) -> list[str]:
     """The ``env`` overrides of the recipe's ``KiteFigureEightFast-v1`` entry as ``--set`` strings."""
-    from kite_env.cli.train import FAST_ENV_ID, load_hyperparameters, recipe_overrides
+    from kite_env.training import FAST_ENV_ID, load_hyperparameters, recipe_overrides
 
     algo = "sac" if recipe.stem == "sac" else "ppo"  # only the env entry is used
     # the training-only start rule table_only becomes table in every evaluation (flight.evaluation_config)
@@ -225,9 +225,9 @@ def main(argv=None) -> int:
     p.add_argument("--learning-curves", nargs="+", type=Path, default=None, metavar="RUN_DIR",
                    help="kite-train run folders to plot into OUT/learning_curves.png")
     args = p.parse_args(argv)
-    from kite_env.cli.train import UsageError
     from kite_env.config import ConfigError
     from kite_env.policies import SHIPPED, shipped_model
+    from kite_env.training import UsageError
 
     out = args.out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

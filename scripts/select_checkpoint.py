@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 def checkpoints(run: Path) -> list[tuple[int, Path, Path]]:
     """(steps, model zip, vecnormalize pkl) of every checkpoint of ``run`` saved with its normalisation, by steps."""
-    from kite_env.cli.train import checkpoint_vecnormalize, checkpoints as saved
+    from kite_env.training import checkpoint_vecnormalize, checkpoints as saved
 
     found = [(n, p, checkpoint_vecnormalize(p.parent, n)) for n, p in saved(run / "checkpoints")]
     return [c for c in found if c[2].is_file()]
@@ -83,10 +83,10 @@ def main(argv=None) -> int:
     if args.ship is not None and args.ship.exists() and not args.force:
         p.error(f"'{args.ship}' exists (use --force to replace it)")
 
-    from kite_env.cli.train import checkpoint_vecnormalize
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.policies import load_model_agent, make_agent
+    from kite_env.training import checkpoint_vecnormalize
 
     cfg = load_config(cfg_path)
     # the run's environment as it trained: its randomised draws, its start rule, its episode length

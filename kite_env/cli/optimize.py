@@ -60,7 +60,7 @@ def _objective(args, cfg, env_id, hp, kind, n_envs):
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.evaluation import evaluate_policy
 
-    from kite_env.cli.train import _META_KEYS, _algo_class, _vec_env, schedules
+    from kite_env.training import _META_KEYS, _algo_class, _vec_env, schedules
 
     def objective(trial) -> float:
         import os
@@ -138,7 +138,7 @@ def _open_study(optuna, url: str, name: str, seed: int, attempts: int = 20):
     import random
     import time
 
-    from kite_env.cli.train import UsageError
+    from kite_env.training import UsageError
 
     kwargs = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
     last = None
@@ -162,7 +162,7 @@ def optimize(args) -> Path:
         import optuna
     except ImportError:  # pragma: no cover (a declared dependency)
         raise SystemExit("kite-train: error: --optimize needs optuna (pip install optuna)") from None
-    from kite_env.cli.train import _vec_env_kind, default_recipe, training_config
+    from kite_env.training import _vec_env_kind, default_recipe, training_config
 
     cfg, env_id, hp = training_config(args)
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
