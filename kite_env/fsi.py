@@ -892,3 +892,12 @@ class _AeroLoad:
             Jr[:, idx, :, idx, :] -= (w._C_damp / (m * self.dt))[None, :, :, :]
         self.n_tangent += 1
         return self.asm.block_data(-self.scale * J)
+
+
+def nominal_wing(kite: str = "rhino16", cfg: Config | None = None) -> AeroelasticWing:
+    """The aeroelastic wing of a named kite with the configured mesh resolution."""
+    from kite_env.geometry import build_kite
+
+    cfg = cfg or Config()
+    mesh = build_kite(kite, n_sections=cfg.kite.n_sections, n_chord=cfg.kite.n_chord)
+    return AeroelasticWing(mesh, cfg)

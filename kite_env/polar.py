@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.aero.sections import section_geometry
-from kite_env.config import Config
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 
 POLAR_COLUMNS = ("alpha_deg", "CL", "CD", "L_over_D", "CM", "tip_distance_m", "max_displacement_m",
@@ -146,12 +145,3 @@ def sweep(wing: AeroelasticWing, airspeed_mps: float, alphas_deg, start_alpha_de
         if start_state is None:
             break
     return [points[i] for i in sorted(points)]
-
-
-def nominal_wing(kite: str = "rhino16", cfg: Config | None = None) -> AeroelasticWing:
-    """The aeroelastic wing of a named kite with the configured mesh resolution."""
-    from kite_env.geometry import build_kite
-
-    cfg = cfg or Config()
-    mesh = build_kite(kite, n_sections=cfg.kite.n_sections, n_chord=cfg.kite.n_chord)
-    return AeroelasticWing(mesh, cfg)

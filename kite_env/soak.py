@@ -4,7 +4,7 @@
     python scripts/soak.py --fidelity fe --episodes 100 --jobs 2 --out runs/soak_fe
 
 An episode flies random actions (uniform in [-1, 1], a new one every control step, seeded by the episode) in the
-conditions the training recipes draw (:data:`kite_env.surrogate.agreement.RANDOM_CONDITIONS`: wind 4-10 m/s,
+conditions the training recipes draw (:data:`kite_env.fitting.agreement.RANDOM_CONDITIONS`: wind 4-10 m/s,
 turbulence up to 0.1, starts on the straight parts at 4.0-4.8 times the wind), episode ``i`` with seed
 ``seed + i``. Every observation and reward is checked for finite values; an exception (a ``NumericalFailure`` of the
 full model included) is caught, counted and its message kept. The table counts the episodes by how they ended.
@@ -25,8 +25,8 @@ import numpy as np
 def _episodes(args) -> list[dict]:
     fidelity, seeds, duration, overrides = args
     from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.fitting.agreement import RANDOM_CONDITIONS
     from kite_env.policies import RandomAgent
-    from kite_env.surrogate.agreement import RANDOM_CONDITIONS
 
     env = KiteFigureEightEnv(overrides=[*RANDOM_CONDITIONS, f"env.max_episode_s={duration}", *overrides],
                              fidelity=fidelity)

@@ -28,7 +28,8 @@ import numpy as np
 
 from kite_env.config import Config
 from kite_env.control import LineActuator, actuate
-from kite_env.dynamics.simulator import SimulationError, make_simulator
+from kite_env.dynamics.factory import make_simulator
+from kite_env.dynamics.simulator import SimulationError
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
 
@@ -244,8 +245,7 @@ def lateral_balance(cfg: Config, airspeed_mps: float, alpha_rad: float, delta_m:
     (:func:`steering_point_stiffness`), towards the KCU at B for ``dL < 0``. docs/steering.md, "Where a steering input
     goes".
     """
-    from kite_env.fsi import FlightState
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import FlightState, nominal_wing
 
     wing = nominal_wing(cfg.kite.name, cfg)
     flight = FlightState.wind_tunnel(airspeed_mps, alpha_rad)
@@ -318,8 +318,7 @@ def _tethered_wing_rig(cfg: Config, airspeed_mps: float, alpha_rad: float, settl
     within about 10 s. The wing is released from the static shape at rest and stepped for ``settle_s``, which leaves
     it moving at about 1e-4 m/s (docs/steering.md, "The yaw rig")."""
     from kite_env.dynamics.wing_dynamics import WingDynamics
-    from kite_env.fsi import FlightState
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import FlightState, nominal_wing
 
     cfg = dataclasses.replace(cfg, structure=dataclasses.replace(cfg.structure, dynamic=True),
                               dynamics=dataclasses.replace(cfg.dynamics, gravity_mps2=0.0, line_cd=0.0))

@@ -53,8 +53,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     from kite_env.config import ConfigError, load_config
-    from kite_env.fsi import FlightState, WingConvergenceError
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import FlightState, WingConvergenceError, nominal_wing
     from kite_env.turn_rate import steering_point_stiffness
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -5,16 +5,16 @@
     kite-fit agreement --out DIR [--surrogate FILE.npz] [--episodes 50] [--jobs J] [--quick]
     kite-fit start-table --out FILE_start.npz [--s-grid 16:58:3] [--w-grid -11:-2:1] [--config FILE] [--set ...]
 
-``sample`` flies the episodes of the sampling plan (:func:`kite_env.surrogate.trajectories.sampling_plan`) in the full
+``sample`` flies the episodes of the sampling plan (:func:`kite_env.fitting.trajectories.sampling_plan`) in the full
 model and keeps every physics step of each (``DIR/ep_XXXX.npz``); a run that was stopped goes on where it stopped.
-``fit`` fits the reduced-order wing to the tapes (:mod:`kite_env.surrogate.fit`; every fifth episode held out) and
+``fit`` fits the reduced-order wing to the tapes (:mod:`kite_env.fitting.fit`; every fifth episode held out) and
 writes its weights with the model they belong to, the held-out errors and the command. ``start-table`` tabulates
 the full model's start (:mod:`kite_env.surrogate.start`) for the reset of the fast fidelity; it belongs next to the
 weights as ``<stem>_start.npz``. Use the result with ``--set sim.surrogate_path=FILE.npz``, or install both into
 ``kite_env/surrogate/data/<kite>.npz`` and ``<kite>_start.npz``.
 
 ``agreement`` flies the paper's controller and random steering in both fidelities and prints the comparison
-(:mod:`kite_env.surrogate.agreement`); the full model's flights are kept in ``DIR/fe`` for the next comparison.
+(:mod:`kite_env.fitting.agreement`); the full model's flights are kept in ``DIR/fe`` for the next comparison.
 
 Exit status: 0 done (``agreement``: and the agreement holds), 1 the agreement does not hold, 2 bad input (one line,
 nothing written), 130 interrupted.
@@ -30,7 +30,7 @@ from pathlib import Path
 
 def _sample_worker(args):
     out, n, seed, overrides, start, step, starts = args
-    from kite_env.surrogate.trajectories import sample_flights
+    from kite_env.fitting.trajectories import sample_flights
 
     sample_flights(out, n, seed, overrides, start=start, step=step, log=lambda s: print(s, flush=True),
                    starts=starts)
@@ -64,8 +64,7 @@ def _fit(args) -> int:
     import numpy as np
 
     from kite_env.config import fingerprint, load_config
-    from kite_env.polar import nominal_wing
-    from kite_env.surrogate.fit import (
+    from kite_env.fitting.fit import (
         FILTERED,
         TAUS,
         FitData,
@@ -74,9 +73,10 @@ def _fit(args) -> int:
         fit_mlp,
         reference_stiffness,
     )
+    from kite_env.fitting.trajectories import load_tape
+    from kite_env.fsi import nominal_wing
     from kite_env.surrogate.model import SurrogateWing
     from kite_env.surrogate.samples import git_commit
-    from kite_env.surrogate.trajectories import load_tape
 
     hidden = tuple(int(h) for h in args.hidden.split(","))
     cfg = load_config(args.config, args.set)
@@ -130,7 +130,7 @@ def _fit(args) -> int:
 
 def _start_table(args) -> int:
     from kite_env.config import load_config
-    from kite_env.surrogate.start import build_start_table
+    from kite_env.dynamics.start_table import build_start_table
 
     cfg = load_config(args.config, args.set)
     s, w = _grid(args.s_grid), _grid(args.w_grid)
@@ -143,7 +143,7 @@ def _start_table(args) -> int:
 
 
 def _agreement(args, base) -> int:
-    from kite_env.surrogate.agreement import FLIGHTS, Flight, agreement_table, run_agreement
+    from kite_env.fitting.agreement import FLIGHTS, Flight, agreement_table, run_agreement
 
     flights: tuple[Flight, ...] = FLIGHTS
     if args.quick:
@@ -165,7 +165,7 @@ def main(argv=None) -> int:
     s.add_argument("--episodes", type=int, default=120)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=1)
-    s.add_argument("--starts", action="store_true", help="short episodes of starts (kite_env.surrogate.trajectories."
+    s.add_argument("--starts", action="store_true", help="short episodes of starts (kite_env.fitting.trajectories."
                    "start_plan) instead of the flights of the sampling plan")
     s.add_argument("--config", default=None, help="physics config (YAML); default: the flying model")
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")

@@ -114,7 +114,8 @@ def _plots(points, wing, out: Path, title: str) -> dict:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from kite_env.config import ConfigError, load_config
-    from kite_env.polar import POLAR_COLUMNS, nominal_wing, parse_alpha_range, sweep
+    from kite_env.fsi import nominal_wing
+    from kite_env.polar import POLAR_COLUMNS, parse_alpha_range, sweep
 
     try:
         alphas = parse_alpha_range(args.alpha_deg)

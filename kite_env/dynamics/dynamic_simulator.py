@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from kite_env.dynamics.kernels import kcu_line_force
-from kite_env.dynamics.particles import KCU, ParticleState, line_drag, tether_drag
+from kite_env.dynamics.lines import LINE_SMOOTHING_N, line_drag, line_tension, tether_drag
+from kite_env.dynamics.particles import KCU, ParticleState
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
-from kite_env.dynamics.wing_dynamics import LINE_SMOOTHING_N, WingDynamics, line_tension
+from kite_env.dynamics.wing_dynamics import WingDynamics
 from kite_env.fsi import WingConvergenceError
 
 

@@ -30,9 +30,9 @@ import numpy as np
 from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, project_constraints, reel_out_speed
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
-from kite_env.fsi import WingSolution
+from kite_env.fsi import WingSolution, nominal_wing
 from kite_env.structure.kernels import njit
-from kite_env.surrogate.fit import filter_gain
+from kite_env.surrogate.model import filter_gain
 from kite_env.wind import _turbulence_kernel
 
 _JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
@@ -271,7 +271,7 @@ def add_stiffness(x, K, y):
 
 @njit(**_JIT)
 def history_inputs(x, z, sel):
-    """The latent state's inputs of the reduced-order wing (:mod:`kite_env.surrogate.fit`): ``x[30 + j n + i] =
+    """The latent state's inputs of the reduced-order wing (:mod:`kite_env.fitting.fit`): ``x[30 + j n + i] =
     z[j, i] - x[sel[i]]`` for the filters ``z`` (n_tau, n) of the inputs ``sel`` (n,); nothing without filters."""
     n = sel.shape[0]
     for j in range(z.shape[0]):
@@ -282,7 +282,7 @@ def history_inputs(x, z, sel):
 @njit(**_JIT)
 def latent_update(x, z, sel, gain, reset):
     """One physics step of the latent low-pass filters: ``z <- z + c (x[sel] - z)`` with ``c = gain[j]`` (the exact
-    discrete first-order filter, :func:`kite_env.surrogate.fit.filter_gain`), or ``z <- x[sel]`` (``reset``: a
+    discrete first-order filter, :func:`kite_env.surrogate.model.filter_gain`), or ``z <- x[sel]`` (``reset``: a
     steady start)."""
     for j in range(z.shape[0]):
         for i in range(sel.shape[0]):
@@ -524,7 +524,7 @@ class SurrogateKites:
         self.pair_damping = np.zeros((n, 4))
         self.n_in = len(surrogate.input_names)
         self.X = np.zeros((n, self.n_in))
-        # the latent state of a wing with memory (kite_env.surrogate.fit): filters of the inputs sel, per kite
+        # the latent state of a wing with memory (kite_env.fitting.fit): filters of the inputs sel, per kite
         self._sel = np.array(surrogate.filtered, dtype=np.int64)
         self._gain = np.array([filter_gain(self.dt, tau) for tau in surrogate.taus])
         self.Z = np.zeros((n, len(self._gain), len(self._sel)))
@@ -695,8 +695,6 @@ class SurrogateFlightSimulator(FlightSimulator):
 
     def __init__(self, cfg, wind, surrogate=None, wing=None, start: str = "table", start_table=None,
                  surrogate_path=None):
-        from kite_env.polar import nominal_wing
-
         if start not in ("table", "fe", "table_only"):
             raise ValueError(f"start must be 'table', 'fe' or 'table_only', got {start!r}")
         self.cfg, self.wind, self.backend = cfg, wind, "numba"
@@ -707,7 +705,7 @@ class SurrogateFlightSimulator(FlightSimulator):
             surrogate, surrogate_path = surrogate_for(cfg)
         self.surrogate = surrogate
         # a wing fitted to the wing with inertia carries the effective force on Table 1's point masses and flies
-        # without the quasi-static wing's tip dampers (kite_env.surrogate.fit)
+        # without the quasi-static wing's tip dampers (kite_env.fitting.fit)
         self.particle_wing = not surrogate.inertial
         self.start_table = start_table
         if start_table is None and start != "fe":

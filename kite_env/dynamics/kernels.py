@@ -488,7 +488,7 @@ def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
     """Line ``i`` from the KCU at ``r_k`` (velocity ``v_k``) to the wing end ``x_b[i]`` (velocity ``v_b[i]``):
     unit vector ``e0, e1, e2`` (KCU -> wing), length ``l``, the spring-damper force ``s`` of Eq. (10),
     ``root = sqrt(s^2 + eps2)`` and the smoothed pull-only tension ``T``
-    (:func:`kite_env.dynamics.wing_dynamics.line_tension`)."""
+    (:func:`kite_env.dynamics.lines.line_tension`)."""
     a0, a1, a2 = x_b[i, 0] - r_k[0], x_b[i, 1] - r_k[1], x_b[i, 2] - r_k[2]
     l = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     e0, e1, e2 = a0 / l, a1 / l, a2 / l
@@ -502,7 +502,7 @@ def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
 @njit(**_JIT)
 def _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef):
     """Eq. (11)'s drag of a straight line of length ``l`` along ``e`` in the apparent wind ``va`` (the whole of it:
-    :func:`kite_env.dynamics.particles.line_drag`, ``drag_coef = -1/2 rho C_D d``)."""
+    :func:`kite_env.dynamics.lines.line_drag`, ``drag_coef = -1/2 rho C_D d``)."""
     p = va0 * e0 + va1 * e1 + va2 * e2
     n0, n1, n2 = va0 - p * e0, va1 - p * e1, va2 - p * e2
     g = drag_coef * (l * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2))
@@ -513,8 +513,8 @@ def _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef):
 def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out):
     """The bridle lines' pull on the KCU and its half of their drag (3,) [N] into ``out``: what
     :meth:`kite_env.dynamics.dynamic_simulator.DynamicFlightSimulator._kcu_acceleration` adds with NumPy, the
-    smoothed pull-only tension of Eq. (10) (:func:`kite_env.dynamics.wing_dynamics.line_tension`, width ``eps``
-    [N]) along each line A-D -> KCU and half of Eq. (11)'s drag (:func:`kite_env.dynamics.particles.line_drag`,
+    smoothed pull-only tension of Eq. (10) (:func:`kite_env.dynamics.lines.line_tension`, width ``eps``
+    [N]) along each line A-D -> KCU and half of Eq. (11)'s drag (:func:`kite_env.dynamics.lines.line_drag`,
     ``drag_coef = -1/2 rho C_D d``) with the apparent wind of the lines' mean velocity minus the mean of the wind
     at their ends (``wind`` (5, 3): A-D, KCU). ``r_b``, ``v_b`` (4, 3): A-D; ``r_k``, ``v_k`` (3,): the KCU."""
     eps2 = eps * eps
@@ -542,9 +542,9 @@ def wing_bridle_lines(x_b, v_b, r_k, v_k, v_wind, rest, k_c, c_c, drag_coef, eps
     """The bridle lines at the wing's ends A-D (:meth:`kite_env.dynamics.wing_dynamics._StepLoad._lines` and the
     drag that ``force`` adds, compiled: a Newton iterate's NumPy calls on four lines cost more than the arithmetic).
     Into ``e`` (4, 3) the unit vectors KCU -> A-D, ``l`` (4,) [m] the lengths, ``T``, ``dT`` (4,) the smoothed
-    pull-only tension of Eq. (10) and its derivative (:func:`kite_env.dynamics.wing_dynamics.line_tension`, width
+    pull-only tension of Eq. (10) and its derivative (:func:`kite_env.dynamics.lines.line_tension`, width
     ``eps`` [N]), ``drag`` (4, 3) [N] the wing end's half of Eq. (11)'s drag
-    (:func:`kite_env.dynamics.particles.line_drag`, ``drag_coef = -1/2 rho C_D d``) with the lines' mean velocity
+    (:func:`kite_env.dynamics.lines.line_drag`, ``drag_coef = -1/2 rho C_D d``) with the lines' mean velocity
     and the wind ``v_wind`` (3,). ``x_b``, ``v_b`` (4, 3): A-D; ``r_k``, ``v_k`` (3,): the KCU; frame of the step."""
     eps2 = eps * eps
     for i in range(4):

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kite_env.config import DynamicsConfig
+from kite_env.dynamics.lines import line_drag, tether_drag
 from kite_env.frames import kite_frame
 
 A, B, C, D, KCU = range(5)
@@ -46,25 +47,6 @@ class ParticleState:
 
     def copy(self) -> ParticleState:
         return ParticleState(self.r.copy(), self.v.copy())
-
-
-def line_drag(coef: float, va: np.ndarray, e: np.ndarray, l: np.ndarray) -> np.ndarray:
-    """Drag of straight lines, Eq. (11) (n, 3) [N]: ``coef l |v_n| v_n`` with ``v_n`` the part of each line's
-    apparent wind ``va`` (n, 3) normal to its direction ``e`` (n, 3), ``l`` (n,) the lengths and ``coef = -1/2 rho
-    C_D d``. Half of it goes to each end."""
-    van = va - np.einsum("ij,ij->i", va, e)[:, None] * e
-    return coef * (l * np.sqrt(np.einsum("ij,ij->i", van, van)))[:, None] * van
-
-
-def tether_drag(coef: float, r_kcu: np.ndarray, v_kcu: np.ndarray, wind_kcu: np.ndarray) -> np.ndarray:
-    """The KCU's half of the optional tether drag (not in the paper's model) (3,) [N]: Eq. (11) for the tether as
-    one straight line from the ground station, with the mean velocity of its ends (the ground end at rest) and the
-    wind at the KCU; ``coef = -1/2 rho C_D d_t``."""
-    lt = float(np.linalg.norm(r_kcu))
-    et = r_kcu / lt
-    vt = 0.5 * v_kcu - wind_kcu
-    vtn = vt - (vt @ et) * et
-    return 0.5 * (coef * lt * np.linalg.norm(vtn)) * vtn
 
 
 def _dist_rows(r: np.ndarray, v: np.ndarray, i: np.ndarray, j: np.ndarray):

@@ -28,7 +28,7 @@ from kite_env.dynamics.kernels import particle_accelerations, project_constraint
 from kite_env.dynamics.particles import DAMPED_PAIRS, A, B, C, D, ParticleState, ParticleSystem
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame, kite_frame_rates
-from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution
+from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution, nominal_wing
 from kite_env.structure.kernels import resolve_backend
 from kite_env.structure.rotations import expm
 
@@ -83,24 +83,6 @@ class StepRecord:
     reel_speed: float = 0.0  # winch reel-out speed of the next step [m/s]
 
 
-def make_simulator(cfg: Config, wind, wing: AeroelasticWing | None = None):
-    """The flight simulator of ``cfg.sim.fidelity``: :class:`FlightSimulator` (``"fe"``) or
-    :class:`kite_env.dynamics.fast.SurrogateFlightSimulator` (``"surrogate"``, the weights of ``sim.surrogate_path``
-    or the model shipped for ``kite.name``)."""
-    if cfg.sim.fidelity == "surrogate":
-        from kite_env.dynamics.fast import SurrogateFlightSimulator
-        from kite_env.surrogate import surrogate_for
-
-        sw, path = surrogate_for(cfg)
-        return SurrogateFlightSimulator(cfg, wind, surrogate=sw, wing=wing, surrogate_path=path,
-                                        start=cfg.sim.surrogate_start)
-    if cfg.structure.dynamic:
-        from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
-
-        return DynamicFlightSimulator(cfg, wind, wing)
-    return FlightSimulator(cfg, wind, wing)
-
-
 class FlightSimulator:
     """The complete flight model: five masses, bridle, tether and the aeroelastic wing.
 
@@ -125,8 +107,6 @@ class FlightSimulator:
     particle_wing = True
 
     def __init__(self, cfg: Config, wind, wing: AeroelasticWing | None = None, backend: str = "auto"):
-        from kite_env.polar import nominal_wing
-
         self.cfg = cfg
         self.wind = wind
         self.backend = resolve_backend(backend)

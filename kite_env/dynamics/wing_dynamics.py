@@ -64,7 +64,7 @@ from kite_env.aero.kernels import section_loads_fields, section_normal_rate_forc
 from kite_env.aero.loads import load_jacobian, section_damping, section_loads
 from kite_env.aero.sections import section_geometry, skew, spanwise_directions
 from kite_env.dynamics.kernels import wing_bridle_lines
-from kite_env.dynamics.particles import line_drag
+from kite_env.dynamics.lines import LINE_SMOOTHING_N, line_drag, line_tension
 from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.frames import cross
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
@@ -76,24 +76,6 @@ from kite_env.structure.shell_membrane import membrane_discrete_gradient, membra
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
 
 _UNIT_X = np.array([1.0, 0.0, 0.0])
-
-#: width of the smoothed pull-only law of the bridle lines [N] (:func:`line_tension`)
-LINE_SMOOTHING_N = 10.0
-
-
-def line_tension(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pull-only line tension from the spring-damper force ``s = k_c (l - L) + c_c dl/dt`` (Eq. 10) and its
-    derivative: ``T = (s + sqrt(s^2 + eps^2)) / 2`` with ``eps = LINE_SMOOTHING_N``, the smooth form of
-    ``max(s, 0)`` (at most ``eps / 2`` = 5 N from it). With the wing's nodes of grams at the trailing-edge tips, a
-    Newton correction of a centimetre changes the steering line's damper force by some 1000 N (``c_c gamma /
-    (beta dt)`` = 10^5 N/m at 5 ms): with the kink of ``max`` the iterates flip the line between taut and slack."""
-    s = np.asarray(s, dtype=float)
-    eps2 = LINE_SMOOTHING_N**2
-    root = np.sqrt(s * s + eps2)
-    # for s < 0 the same value without the cancellation of s + root: eps^2 / (2 (root - s))
-    T = np.where(s >= 0.0, 0.5 * (s + root), 0.5 * eps2 / (root - np.minimum(s, 0.0)))
-    return T, 0.5 * (1.0 + s / root)
-
 
 @dataclass(frozen=True)
 class AlphaParameters:
@@ -246,8 +228,8 @@ class _StepLoad:
 
     def _lines(self, x, v):
         """The bridle lines (Eq. 10) at the iterate: ``e`` (4, 3) the unit vectors KCU -> A-D, ``l`` (4,) [m],
-        tension ``T`` (4,) [N] and ``dT = dT/ds`` (:func:`line_tension`), and the wing ends' half of their drag
-        (Eq. 11) (4, 3) [N]."""
+        tension ``T`` (4,) [N] and ``dT = dT/ds`` (:func:`kite_env.dynamics.lines.line_tension`), and the wing ends'
+        half of their drag (Eq. 11) (4, 3) [N]."""
         dyn = self.dyn
         b = dyn.bridle
         if dyn.compiled:

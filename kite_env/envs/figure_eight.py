@@ -19,7 +19,8 @@ from gymnasium import spaces
 
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
 from kite_env.control import LineActuator
-from kite_env.dynamics.simulator import FlightSimulator, NumericalFailure, SimulationError, StepRecord, make_simulator
+from kite_env.dynamics.factory import make_simulator
+from kite_env.dynamics.simulator import FlightSimulator, NumericalFailure, SimulationError, StepRecord
 from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField

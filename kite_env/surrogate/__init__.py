@@ -1,6 +1,8 @@
-"""Reduced-order wing (the fast fidelity): flights of the full model recorded step by step (:mod:`.trajectories`),
-the wing fitted to them (:mod:`.fit`, :mod:`.model`), the start table of the reset (:mod:`.start`) and the agreement
-of the two fidelities over whole flights (:mod:`.agreement`).
+"""Reduced-order wing (the fast fidelity): the wing (:mod:`.model`) and its inputs and outputs (:mod:`.samples`), the
+start table of the reset (:mod:`.start`) and the shipped files. It stands below the dynamics, which fly it
+(:mod:`kite_env.dynamics.fast`); how it is made (flights of the full model recorded step by step, the fit, the
+agreement of the two fidelities) is :mod:`kite_env.fitting`, above the environment, and the start table is built by
+:mod:`kite_env.dynamics.start_table`.
 
 The fitted files of a kite ship in ``kite_env/surrogate/data/`` as ``<kite>.npz`` (weights with the model they were
 fitted to, provenance and held-out errors) and ``<kite>_start.npz`` (start table); ``kite-fit`` makes both for any

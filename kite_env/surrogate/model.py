@@ -1,4 +1,4 @@
-"""Reduced-order wing: a small MLP fitted to the full aeroelastic wing (:mod:`.fit`).
+"""Reduced-order wing: a small MLP fitted to the full aeroelastic wing (:mod:`kite_env.fitting.fit`).
 
 :class:`SurrogateWing` maps the 30 inputs of :data:`~kite_env.surrogate.samples.INPUT_NAMES` (and, for a wing with
 memory, its filtered inputs) to the 17 outputs of :data:`~kite_env.surrogate.samples.OUTPUT_NAMES`: a tanh
@@ -15,6 +15,7 @@ what the full model was sampled at.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,7 +52,7 @@ class SurrogateWing:
     x_max: np.ndarray
     meta: dict = field(default_factory=dict)
     #: (12, 12) [N/m]: the known linear part of the bridle force, ``F_b = MLP(x) + K_b (q_b - q_design)`` (zero: all
-    #: learnt; :mod:`kite_env.surrogate.fit` explains why the wing with inertia's has one)
+    #: learnt; :mod:`kite_env.fitting.fit` explains why the wing with inertia's has one)
     K_b: np.ndarray = field(default_factory=lambda: np.zeros((12, 12)))
 
     def __post_init__(self):
@@ -64,7 +65,7 @@ class SurrogateWing:
 
     @property
     def taus(self) -> tuple[float, ...]:
-        """Time constants [s] of the latent low-pass filters (:mod:`kite_env.surrogate.fit`); () for a memoryless
+        """Time constants [s] of the latent low-pass filters (:mod:`kite_env.fitting.fit`); () for a memoryless
         wing (the quasi-static wing's)."""
         return tuple(float(t) for t in self.meta.get("history", {}).get("taus_s", ()))
 
@@ -82,7 +83,7 @@ class SurrogateWing:
     @property
     def inertial(self) -> bool:
         """Fitted to the wing with inertia: its outputs are the effective wing force on Table 1's point masses at
-        A-D (:mod:`kite_env.surrogate.fit`), flown without the tip dampers of the quasi-static wing."""
+        A-D (:mod:`kite_env.fitting.fit`), flown without the tip dampers of the quasi-static wing."""
         return bool(self.meta.get("history", {}).get("inertial", False))
 
     def predict(self, x: np.ndarray) -> np.ndarray:
@@ -140,6 +141,12 @@ class SurrogateWing:
             if tuple(z["input_names"]) != sw.input_names or tuple(z["output_names"]) != OUTPUT_NAMES:
                 raise ValueError(f"surrogate weights '{path}' were fitted for another input/output layout")
             return sw
+
+
+def filter_gain(dt: float, tau: float) -> float:
+    """Gain of the latent state's filters, the exact discrete first-order low-pass over one step:
+    ``z <- z + c (x - z)``, ``c = 1 - exp(-dt/tau)``."""
+    return 1.0 - math.exp(-dt / tau)
 
 
 def history_names(taus, filtered) -> tuple[str, ...]:

@@ -7,7 +7,7 @@ Inputs (``INPUT_NAMES``, 30 values, SI units, frame K):
 * ``v_app = v_kite - v_wind`` (3): apparent velocity of the frame origin (the air comes from ``-v_app``) [m/s],
 * ``omega`` (3): rotation rate of K [rad/s].
 
-The wing with memory adds filtered inputs (:mod:`kite_env.surrogate.fit`). Outputs (``OUTPUT_NAMES``, 17 values):
+The wing with memory adds filtered inputs (:mod:`kite_env.fitting.fit`). Outputs (``OUTPUT_NAMES``, 17 values):
 ``F_b`` (12, A-D x, y, z in K) [N] (the force that the bridle points exert on the wing: the wing pulls A-D with
 ``-F_b``), the angles of attack of the right tip, mid and left tip sections [rad], the wing's lift and drag [N].
 """

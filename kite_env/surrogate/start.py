@@ -3,8 +3,8 @@
 The flight simulator's reset (:meth:`kite_env.dynamics.simulator.FlightSimulator.reset`) solves the FE wing
 statically, held by its bridle lines, at the start state X (no rotation) and takes from it the bridle points ``q0``
 (4, 3), their forces ``F_b`` (4, 3) and the tip-pair stiffness ``k_pairs`` (4,) (``_start_wing``). The fast
-fidelity cannot run the FE wing at every reset, so :func:`build_start_table` runs exactly that path of the full
-model on a grid and :class:`StartTable` interpolates it.
+fidelity cannot run the FE wing at every reset, so :func:`kite_env.dynamics.start_table.build_start_table` runs
+exactly that path of the full model on a grid and :class:`StartTable` interpolates it.
 
 Why two numbers suffice: the wing's loads depend on the flight state only through the apparent velocity
 ``v_app = v_kite - v_wind`` (Eq. 2: ``v_a^i = v_k + omega_k x r_i1 + u_i - v_w``, here with ``omega_k = 0`` and no
@@ -22,22 +22,12 @@ a cell with such a point raises :class:`ValueError`.
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from kite_env.fsi import FlightState, WingConvergenceError
-
 FORMAT = "kite_env.start_table/1"
-
-
-class _NoWind:
-    """Still air: the table's flight states carry the apparent velocity in ``v_kite`` (the wing sees only v_app)."""
-
-    def velocity(self, t, r):
-        return np.zeros((len(np.atleast_2d(r)), 3))
 
 
 @dataclass
@@ -146,51 +136,3 @@ class StartTable:
             if "format" not in z.files or str(z["format"]) != FORMAT:
                 raise ValueError(f"'{path}' is not a start table ({FORMAT})")
             return cls(z["s"], z["w"], z["q0"], z["F_b"], z["k_pairs"], json.loads(str(z["meta"])))
-
-
-def start_state(cfg, s: float, w: float):
-    """The full model's start at one grid point: a fresh :class:`FlightSimulator` (so that the result does not
-    depend on earlier solves; the tip-pair stiffness's finite differences are sensitive to the solver's warm state),
-    the wing reset with the configured power-line length as in ``reset``, and ``_start_wing`` at
-    ``v_app = (-s, 0, w)``. Returns ``(q0, F_b, k_pairs)``; raises ``SimulationError`` or
-    :class:`~kite_env.fsi.WingConvergenceError` where the full model does not converge."""
-    from kite_env.dynamics.simulator import FlightSimulator
-
-    sim = FlightSimulator(cfg, _NoWind())
-    sim.particle_wing = not cfg.structure.dynamic  # (the wing with inertia's start has no tip dampers)
-    sim.wing.reset()
-    sim.wing.line_length_m = cfg.dynamics.power_line_length_m
-    X = FlightState(v_kite=np.array([-float(s), 0.0, float(w)]), omega=np.zeros(3), v_wind=np.zeros(3))
-    return sim._start_wing(X)
-
-
-def build_start_table(cfg, s_values, w_values, log=None) -> StartTable:
-    """Run the full model's start (:func:`start_state`) at every (s, w) of the grid ``s_values`` x ``w_values``
-    [m/s]; points that do not converge are stored as NaN and listed in ``meta["failed"]``. ``log(str)`` reports
-    each point."""
-    from kite_env.config import fingerprint
-    from kite_env.dynamics.simulator import SimulationError
-    from kite_env.surrogate.samples import git_commit
-
-    s_values, w_values = np.asarray(s_values, float), np.asarray(w_values, float)
-    n_s, n_w = len(s_values), len(w_values)
-    q0 = np.full((n_s, n_w, 4, 3), np.nan)
-    F_b = np.full((n_s, n_w, 4, 3), np.nan)
-    k = np.full((n_s, n_w, 4), np.nan)
-    failed, t0 = [], time.perf_counter()
-    for a, s in enumerate(s_values):
-        for b, w in enumerate(w_values):
-            t1 = time.perf_counter()
-            try:
-                q0[a, b], F_b[a, b], k[a, b] = start_state(cfg, s, w)
-                msg = f"|F| = {np.linalg.norm(F_b[a, b].sum(axis=0)):8.1f} N  k_pairs = {np.round(k[a, b], 1)}"
-            except (SimulationError, WingConvergenceError) as exc:
-                failed.append({"s": float(s), "w": float(w), "error": str(exc).splitlines()[0][:200]})
-                msg = "did not converge"
-            if log is not None:
-                log(f"start table  s = {s:5.1f}  w = {w:6.1f}  {time.perf_counter() - t1:5.2f} s  {msg}")
-    meta = {"git_commit": git_commit(), "kite": cfg.kite.name, "config": cfg.to_dict(), "model": fingerprint(cfg),
-            "power_line_length_m": float(cfg.dynamics.power_line_length_m), "s_mps": s_values.tolist(),
-            "w_mps": w_values.tolist(), "n_points": n_s * n_w, "n_failed": len(failed), "failed": failed,
-            "wall_time_s": time.perf_counter() - t0}
-    return StartTable(s_values, w_values, q0, F_b, k, meta)

@@ -25,8 +25,7 @@ from kite_env.aero.breukels import lei_coefficients
 from kite_env.aero.loads import section_damping, section_loads
 from kite_env.aero.sections import section_geometry, spanwise_directions
 from kite_env.config import Config
-from kite_env.fsi import AeroelasticWing, FlightState, _AeroLoad
-from kite_env.polar import nominal_wing
+from kite_env.fsi import AeroelasticWing, FlightState, _AeroLoad, nominal_wing
 
 AIRSPEED = 25.0  # [m/s]
 ALPHA_NOMINAL = np.deg2rad(16.0)  # kite angle of attack of the loaded nominal state (as tests/test_fsi.py)

@@ -10,8 +10,7 @@ import pytest
 
 from kite_env.aero.sections import section_geometry
 from kite_env.config import load_config
-from kite_env.fsi import FlightState
-from kite_env.polar import nominal_wing
+from kite_env.fsi import FlightState, nominal_wing
 from kite_env.turn_rate import steering_point_stiffness
 
 FLIGHT = FlightState.wind_tunnel(25.0, np.deg2rad(8.0))

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from kite_env.config import Config, ConfigError, ModelMismatch, fingerprint, load_config
+from kite_env.dynamics.factory import make_simulator
 from kite_env.dynamics.fast import OK, OUTSIDE, SurrogateFlightSimulator, SurrogateKites, kite_inputs
-from kite_env.dynamics.simulator import SimulationError, make_simulator
+from kite_env.dynamics.simulator import SimulationError
+from kite_env.fitting.fit import FILTERED, filter_gain, latent_features
 from kite_env.frames import kite_frame
-from kite_env.fsi import FlightState
-from kite_env.polar import nominal_wing
+from kite_env.fsi import FlightState, nominal_wing
 from kite_env.surrogate import default_surrogate_path, load_default, surrogate_for
-from kite_env.surrogate.fit import FILTERED, filter_gain, latent_features
 from kite_env.surrogate.samples import features
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindConfig, WindField
@@ -357,7 +357,7 @@ def test_the_fast_fidelity_agrees_with_the_full_model_over_a_turbulent_flight():
     """The paper's controller 15 s at 8 m/s with turbulence 0.1 (the same realisation) in both fidelities: the mean
     traction within 3 % and the tracking error within 1 deg (kite_env.surrogate.agreement's targets; the README's
     agreement table has the long flights, where 4-5 m/s do not hold)."""
-    from kite_env.surrogate.agreement import TRACKING_DEG, TRACTION_REL, fly_case
+    from kite_env.fitting.agreement import TRACKING_DEG, TRACTION_REL, fly_case
 
     base = ["wind.speed_mps=8.0", "wind.turbulence_intensity=0.1", "wind.seed=0"]
     full = fly_case((base, 15.0))

@@ -242,8 +242,7 @@ def test_kcu_line_force_matches_the_numpy_lines(seed):
     round-off; one line slack (its tension the smoothing's few newtons) and one stretched so that both branches of
     the law are taken."""
     from kite_env.dynamics.kernels import kcu_line_force
-    from kite_env.dynamics.particles import line_drag
-    from kite_env.dynamics.wing_dynamics import LINE_SMOOTHING_N, line_tension
+    from kite_env.dynamics.lines import LINE_SMOOTHING_N, line_drag, line_tension
 
     rng = np.random.default_rng(seed)
     r_k = np.array([60.0, 5.0, 70.0]) + rng.normal(size=3)
@@ -272,8 +271,7 @@ def test_wing_bridle_lines_match_the_numpy_lines(seed):
     the wing end's half of Eq. (11)'s drag with the lines' mean velocity, to round-off; one line slack and one
     stretched, so that both branches of the tension law are taken."""
     from kite_env.dynamics.kernels import wing_bridle_lines
-    from kite_env.dynamics.particles import line_drag
-    from kite_env.dynamics.wing_dynamics import LINE_SMOOTHING_N, line_tension
+    from kite_env.dynamics.lines import LINE_SMOOTHING_N, line_drag, line_tension
 
     rng = np.random.default_rng(seed)
     r_k = rng.normal(size=3)

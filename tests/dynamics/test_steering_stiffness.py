@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from kite_env.config import load_config
-from kite_env.fsi import FlightState
-from kite_env.polar import nominal_wing
+from kite_env.fsi import FlightState, nominal_wing
 from kite_env.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
 
 K_LINE = 4.52e3  # Table 1

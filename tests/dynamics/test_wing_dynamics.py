@@ -12,11 +12,11 @@ import pytest
 
 from kite_env.config import Config, ConfigError, config_from_dict
 from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
-from kite_env.dynamics.simulator import make_simulator
-from kite_env.dynamics.wing_dynamics import AlphaParameters, WingDynamics, _StepLoad, line_tension
+from kite_env.dynamics.factory import make_simulator
+from kite_env.dynamics.lines import line_tension
+from kite_env.dynamics.wing_dynamics import AlphaParameters, WingDynamics, _StepLoad
 from kite_env.dynamics.wing_mass import nodal_wing_mass
-from kite_env.fsi import WingConvergenceError
-from kite_env.polar import nominal_wing
+from kite_env.fsi import WingConvergenceError, nominal_wing
 from kite_env.structure.rotations import logm
 from kite_env.structure.solver import NodalState
 

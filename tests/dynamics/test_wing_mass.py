@@ -19,8 +19,7 @@ from kite_env.dynamics.particles import KCU, A, B, C, D
 from kite_env.dynamics.simulator import FlightSimulator
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame
-from kite_env.fsi import FlightState
-from kite_env.polar import nominal_wing
+from kite_env.fsi import FlightState, nominal_wing
 from kite_env.structure import kernels as structure_kernels
 
 from test_flight import UniformWind  # noqa: E402  (the same uniform wind as the flight tests)

@@ -11,9 +11,7 @@ import numpy as np
 import pytest
 
 from kite_env.config import Config, ModelMismatch, fingerprint, load_config
-from kite_env.frames import kite_frame
-from kite_env.fsi import FlightState
-from kite_env.surrogate.fit import (
+from kite_env.fitting.fit import (
     FILTERED,
     TAUS,
     FitData,
@@ -24,9 +22,11 @@ from kite_env.surrogate.fit import (
     latent_features,
     tape_samples,
 )
+from kite_env.fitting.trajectories import COLUMNS, EpisodePlan, FlightTape, fly_plan, load_tape, save_tape
+from kite_env.frames import kite_frame
+from kite_env.fsi import FlightState
 from kite_env.surrogate.model import SurrogateWing, output_errors
 from kite_env.surrogate.samples import INPUT_NAMES, OUTPUT_NAMES, features
-from kite_env.surrogate.trajectories import COLUMNS, EpisodePlan, FlightTape, fly_plan, load_tape, save_tape
 
 
 def test_features_layout():
@@ -49,7 +49,7 @@ def test_features_layout():
 def test_wing_depends_on_the_apparent_velocity_only():
     """The inputs carry v_kite - v_wind only: the FE wing's loads (default model) must not depend on v_kite and
     v_wind separately."""
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import nominal_wing
 
     wing = nominal_wing("rhino16", Config())
     X1 = FlightState(v_kite=np.array([-22.0, 0.0, -4.0]), omega=np.zeros(3), v_wind=np.array([3.0, 0.0, 1.5]))
@@ -257,7 +257,7 @@ def test_tapes_save_and_load(tape, tmp_path):
 
 
 def _geometry(cfg):
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import nominal_wing
 
     wing = nominal_wing(cfg.kite.name, cfg)
     q0 = wing.design_bridle

@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 
 from kite_env.config import Config, ModelMismatch, fingerprint, load_config
+from kite_env.dynamics import start_table as start
 from kite_env.dynamics.fast import SurrogateFlightSimulator, _default_start_table
 from kite_env.dynamics.simulator import SimulationError
-from kite_env.polar import nominal_wing
-from kite_env.surrogate import DATA_DIR, default_surrogate_path, load_default, start
-from kite_env.surrogate.start import StartTable, build_start_table
+from kite_env.dynamics.start_table import build_start_table
+from kite_env.fsi import nominal_wing
+from kite_env.surrogate import DATA_DIR, default_surrogate_path, load_default
+from kite_env.surrogate.start import StartTable
 from kite_env.wind import WindConfig, WindField
 
 #: a 2 x 2 grid around the default flight's start (22 m/s along the path at the crossing in 5 m/s of wind:

@@ -1,4 +1,4 @@
-"""Fit the reduced-order wing of the wing with inertia to recorded flights (:mod:`kite_env.surrogate.trajectories`).
+"""Fit the reduced-order wing of the wing with inertia to recorded flights (:mod:`kite_env.fitting.trajectories`).
 
 The fast fidelity keeps the paper's particle system (Sect. II.C: A, B, C, D with Table 1's point masses, the KCU, the
 bridle lines, the tether and the tip constraints) and replaces the FE wing by a learned force on A-D. For the wing
@@ -24,12 +24,13 @@ difference between the filtered inputs :data:`FILTERED` and their current values
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from kite_env.surrogate.model import filter_gain
 
 #: the sections' angles of attack are fitted within +-ALPHA_BOUND [rad]: beyond it a section is stalled or, on a kite
 #: that falls back on a slack tether, blown from behind (alpha jumps by 2 pi at the rear); the reduced-order wing
@@ -46,12 +47,6 @@ def history_names(taus=TAUS) -> tuple[str, ...]:
     from kite_env.surrogate.model import history_names as names
 
     return names(taus, FILTERED)
-
-
-def filter_gain(dt: float, tau: float) -> float:
-    """Gain of the exact discrete first-order low-pass over one step: ``z <- z + c (x - z)``,
-    ``c = 1 - exp(-dt/tau)``."""
-    return 1.0 - math.exp(-dt / tau)
 
 
 def latent_features(X: np.ndarray, dt: float, taus=TAUS) -> np.ndarray:
@@ -116,7 +111,7 @@ def build_dataset(tape_dir: str | Path, cfg, wing, taus=TAUS, accel: str = "cent
                   log=print) -> FitData:
     """All tapes of ``tape_dir`` as one data set (every ``every``-th row; the history along every row)."""
     from kite_env.config import check_model
-    from kite_env.surrogate.trajectories import load_tape
+    from kite_env.fitting.trajectories import load_tape
 
     log(f"reading the tapes of '{tape_dir}'")
     q0 = wing.design_bridle
@@ -280,7 +275,7 @@ def replay(arrays: dict, meta: dict, surrogate, start: int = 0, n_steps: int | N
     wind. Returns ``(r, v)`` (n, 5, 3) of the fast kites and the status of each step: how far and how soon the
     reduced-order wing drifts from the full model it was fitted to."""
     from kite_env.dynamics.fast import SurrogateKites
-    from kite_env.polar import nominal_wing
+    from kite_env.fsi import nominal_wing
     from kite_env.wind import WindField
 
     cfg = tape_config(meta)
@@ -370,7 +365,7 @@ def closed_loop(tape_path, surrogate_path) -> tuple[dict, dict, str, str]:
     """The planned episode of a recorded flight flown again in the fast fidelity (same start, wind, turbulence and
     policy, in closed loop): ``(full-model metrics, fast metrics, full-model end, fast end)``
     (:func:`tape_metrics`)."""
-    from kite_env.surrogate.trajectories import EpisodePlan, fly_plan, load_tape
+    from kite_env.fitting.trajectories import EpisodePlan, fly_plan, load_tape
 
     arrays, meta = load_tape(tape_path)
     cfg = tape_config(meta)
