@@ -2,7 +2,7 @@
 
 ``bash scripts/run_baseline.sh`` runs ``kite-eval --policy baseline --duration 60``; this flies the same episode
 through the library functions kite-eval calls (:func:`kite_env.flight.evaluation_config`,
-:func:`agents.policies.make_agent`, :func:`kite_env.flight.run_episode`, :func:`kite_env.metrics.compute_metrics`,
+:func:`kite_env.policies.make_agent`, :func:`kite_env.flight.run_episode`, :func:`kite_env.metrics.compute_metrics`,
 :func:`kite_env.metrics.paper_comparison`): the default configuration, steady 5 m/s wind, the seed of the config.
 It must complete the 60 s without a crash and fly at least 3 figure-eights, and each row of the model-vs-paper table
 (``metrics.json``'s ``paper_comparison``) is asserted: an end of a range that lies in the paper's range must stay in

@@ -276,7 +276,7 @@ def test_shipped_recipes_give_the_training_conditions(path):
     hp = train_cli.load_hyperparameters(path, path.stem, train_cli.FAST_ENV_ID)
     assert hp["n_envs"] == 16 and hp["vec_env"] == "batched"
     env = load_config(None, train_cli.recipe_overrides(hp)).env
-    # the conditions the reduced-order wing was fitted in (kite_env.surrogate.trajectories.EpisodePlan)
+    # the conditions the reduced-order wing was fitted in (kite_env.fitting.trajectories.EpisodePlan)
     assert (env.wind_speed_min_mps, env.wind_speed_max_mps) == (4.0, 10.0)
     assert env.turbulence_intensity_max == 0.1 and env.random_start is True and env.randomize is True
     assert env.start_curvature_max == 1.0

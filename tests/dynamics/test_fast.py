@@ -137,9 +137,9 @@ def test_the_latent_filters_follow_the_inputs_as_in_the_fit(setup):
     """The reduced-order wing's latent state in the kernel: ``evaluate`` starts the filters at the current inputs
     (a steady start: history inputs zero, ``Z`` the filtered inputs); each step updates them with the step's end
     inputs, ``z <- z + (1 - exp(-dt/tau)) (x[sel] - z)``, and feeds ``z - x[sel]`` to the MLP: along the kernel's own
-    inputs this is :func:`kite_env.surrogate.fit.latent_features`, the history the wing was fitted with."""
+    inputs this is :func:`kite_env.fitting.fit.latent_features`, the history the wing was fitted with."""
     cfg, wing, sw, path = setup
-    assert sw.taus and sw.filtered == FILTERED and sw.inertial  # a wing with memory, fitted by kite_env.surrogate.fit
+    assert sw.taus and sw.filtered == FILTERED and sw.inertial  # a wing with memory, fitted by kite_env.fitting.fit
     sel = np.asarray(sw.filtered)
     n_sel = len(sel)
     assert len(sw.input_names) == 30 + len(sw.taus) * n_sel
@@ -355,7 +355,7 @@ def test_a_wing_fitted_to_another_model_is_refused(setup, tmp_path):
 @pytest.mark.slow  # 15 s of the full model: ~20-40 s
 def test_the_fast_fidelity_agrees_with_the_full_model_over_a_turbulent_flight():
     """The paper's controller 15 s at 8 m/s with turbulence 0.1 (the same realisation) in both fidelities: the mean
-    traction within 3 % and the tracking error within 1 deg (kite_env.surrogate.agreement's targets; the README's
+    traction within 3 % and the tracking error within 1 deg (kite_env.fitting.agreement's targets; the README's
     agreement table has the long flights, where 4-5 m/s do not hold)."""
     from kite_env.fitting.agreement import TRACKING_DEG, TRACTION_REL, fly_case
 
