@@ -2,6 +2,7 @@
 
     python scripts/soak.py --fidelity surrogate --episodes 10000 --jobs 2 --out runs/soak_fast
     python scripts/soak.py --fidelity fe --episodes 100 --jobs 2 --out runs/soak_fe
+    python scripts/soak.py --fidelity batched --episodes 10000 --out runs/soak_batched
 
 Exit status 0 when no step was non-finite and nothing raised, 1 otherwise, 2 for bad input.
 """
@@ -14,7 +15,8 @@ import sys
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--fidelity", choices=("surrogate", "fe"), required=True)
+    p.add_argument("--fidelity", choices=("surrogate", "fe", "batched"), required=True,
+                   help="surrogate / fe: the single env of that wing; batched: the fast fidelity's vector env")
     p.add_argument("--episodes", type=int, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=30.0)
