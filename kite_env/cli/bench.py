@@ -87,8 +87,8 @@ def main(argv=None) -> int:
     p.add_argument("--n-kites", type=int, default=64, help="kites of the batched env (default 64)")
     p.add_argument("--fidelity", action="append", choices=("fe", "surrogate", "batched"), default=None,
                    help="benchmark only these (repeatable; default all)")
-    p.add_argument("--config", default=None, help="YAML config (e.g. configs/legacy_v0.yaml, the model the shipped "
-                   "reduced-order wing was fitted to); --set overrides apply on top")
+    p.add_argument("--config", default=None, help="physics and task config YAML (default: the flying model; the fast "
+                   "fidelity needs a reduced-order wing fitted to it); --set overrides apply on top")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     args = p.parse_args(argv)
     if args.steps <= 0:

@@ -92,7 +92,7 @@ def tape_samples(arrays: dict, cfg, q_design: np.ndarray, tip_lengths, accel: st
         ps.set_steering(float(arrays["rest"][k, 1]), float(arrays["rest"][k, 3]))
         f, _ = ps.forces(r[k], v[k], wind[k, :5], np.zeros((4, 3)))
         F_w = ps.m[:4, None] * a[k, :4] - f[:4]
-        Y[k, :12] = -(F_w @ R).ravel()  # the reaction F_b = -F_wing in K (the legacy layout: F_k = -F_b on A-D)
+        Y[k, :12] = -(F_w @ R).ravel()  # the reaction F_b = -F_wing in K (the static wing's layout: F_k = -F_b on A-D)
         Y[k, 12:15] = np.clip(arrays["alpha"][k], -ALPHA_BOUND, ALPHA_BOUND)
         Y[k, 15], Y[k, 16] = arrays["lift"][k], arrays["drag"][k]
     ok = np.all(np.isfinite(X), axis=1) & np.all(np.isfinite(Y), axis=1)
