@@ -45,6 +45,13 @@ INFO_FEATURES = FEATURES[:-1]
 _ONE = np.ones(1, dtype=np.bool_)
 
 
+def slack_tether_ends(cfg) -> bool:
+    """Whether a slack tether (force below ``env.slack_tether_N``) ends an episode: on the rod tether (Eq. 12-13,
+    which would have to push) and with the quasi-static wing, whose tether is always the rod; the rope of the wing
+    with inertia goes slack and flies on."""
+    return cfg.dynamics.tether == "rod" or not cfg.structure.dynamic
+
+
 def reward_terms(env, tracking, tether_N, a, last_a, failed):
     """Reward terms of one step (floats, or (n,) arrays for a batch; the same operations in both cases).
 
@@ -326,7 +333,7 @@ class KiteFigureEightEnv(gym.Env):
         reason = detail = None
         # a slack tether ends the episode on a rod; the default rope goes slack and flies on (the quasi-static wing's
         # tether is always the rod)
-        slack_ends = cfg.dynamics.tether == "rod" or not cfg.structure.dynamic
+        slack_ends = slack_tether_ends(cfg)
         newton = []  # Newton iterations of each physics step's FE wing (none from the surrogate)
         for _ in range(self.n_physics):
             t0 = time.perf_counter()
@@ -342,9 +349,9 @@ class KiteFigureEightEnv(gym.Env):
                 newton.append(int(rec.wing.newton_iters))
             if self.recorder is not None:
                 self.recorder.record(rec, self.L_B, self.L_D, ainfo, time.perf_counter() - t0)
-            r_kcu = rec.state.r[4]
+            x, y, z = (float(c) for c in rec.state.r[4])
             self.substepped_steps += rec.substeps > 1
-            if r_kcu[2] < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(float(r_kcu @ r_kcu)):
+            if z < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(x * x + y * y + z * z):  # the batch: the same sums
                 reason = "ground"
                 break
             if slack_ends and rec.tether_force < cfg.env.slack_tether_N:

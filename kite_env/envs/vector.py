@@ -44,6 +44,7 @@ from kite_env.envs.figure_eight import (
     KiteFigureEightEnv,
     resolve_config,
     reward_terms,
+    slack_tether_ends,
 )
 from kite_env.envs.observe import FEATURES, N_PARTS
 
@@ -97,6 +98,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self._observer = e0._observer
         self._low, self._high = e0.observation_space.low, e0.observation_space.high
         self._sin_ground = math.sin(GROUND_ELEVATION_RAD)  # ground contact: the KCU below 3 deg elevation
+        self._slack_ends = slack_tether_ends(cfg)
         self.kites: SurrogateKites | None = None  # built at the first reset (from the first kite's simulator)
         self.steps = np.zeros(n, dtype=np.int64)
         self.last_action = np.zeros(n)
@@ -216,8 +218,12 @@ class KiteFigureEightVectorEnv(VectorEnv):
                     for name in _OBS_ROWS:  # the observation is that of the last good state
                         getattr(ks, name)[i] = snap[name][i]
                 active &= ~bad
-            ground = active & (ks.r[:, 4, 2] < self._sin_ground * ks.tether_length)
-            slack = active & ~ground & (ks.tether_force < cfg.env.slack_tether_N)
+            # the single env's checks (KiteFigureEightEnv.step), with its sums: the KCU below 3 deg elevation of its own
+            # distance (a slack rope is shorter than the tether), a slack tether only where it ends an episode
+            r4 = ks.r[:, 4]
+            ground = active & (r4[:, 2] < self._sin_ground * np.sqrt(r4[:, 0] * r4[:, 0] + r4[:, 1] * r4[:, 1]
+                                                                      + r4[:, 2] * r4[:, 2]))
+            slack = active & ~ground & (ks.tether_force < cfg.env.slack_tether_N) & self._slack_ends
             code[ground] = _GROUND
             code[slack] = _SLACK
             active &= ~(ground | slack)

@@ -63,6 +63,32 @@ def test_batch_equals_single_envs_with_autoreset(vec):
     assert obs_in_space(vec, r1[0])
 
 
+def test_batch_equals_single_envs_through_random_steering_to_the_ground():
+    """Random full-range steering over whole episodes (up to 30 s, the soak's conditions): the batch ends each kite
+    when and why the single env does, bitwise, through ground contacts, the fitted envelope and a slack rope (which
+    goes slack and flies on: a slack tether ends an episode only on the rod tether or with the quasi-static wing)."""
+    ovr = [*OVERRIDES[:-1], "env.max_episode_s=30", "env.initial_speed_per_wind_min=4.0",
+           "env.initial_speed_per_wind_max=4.8"]
+    n = 4
+    vec = KiteFigureEightVectorEnv(n, overrides=ovr)
+    assert vec.cfg.dynamics.tether == "rope" and vec.cfg.structure.dynamic
+    sync = gym.vector.SyncVectorEnv([lambda: KiteFigureEightEnv(overrides=ovr, fidelity="surrogate")
+                                     for _ in range(n)])
+    np.testing.assert_array_equal(vec.reset(seed=3)[0], sync.reset(seed=3)[0])
+    rng = np.random.default_rng(2)
+    reasons, slack_steps = [], 0
+    for _ in range(900):
+        a = rng.uniform(-1.0, 1.0, (n, 1)).astype(np.float32)
+        r1, r2 = vec.step(a), sync.step(a)
+        for x, y, what in zip(r1[:4], r2[:4], ("obs", "reward", "terminated", "truncated")):
+            _assert_same(x, y, what)
+        _assert_same(r1[4]["termination_reason"], r2[4]["termination_reason"], "termination_reason")
+        reasons += [str(r) for r in r1[4]["termination_reason"][r1[2]]]
+        slack_steps += int(np.sum(r1[4].get("tether_force_N", np.full(n, np.inf)) < vec.cfg.env.slack_tether_N))
+    assert "ground" in reasons and "slack tether" not in reasons, reasons
+    assert slack_steps > 0  # the rope went slack and the kite flew on
+
+
 def obs_in_space(env, obs):
     return obs.shape == env.observation_space.shape and bool(np.all(env.observation_space.contains(obs)))
 
