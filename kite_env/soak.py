@@ -10,6 +10,9 @@ turbulence up to 0.1, starts on the straight parts at 4.0-4.8 times the wind), e
 ``seed + i``. Every observation and reward is checked for finite values; an exception (a ``NumericalFailure`` of the
 full model included) is caught, counted and its message kept. The table counts the episodes by how they ended.
 
+A long soak of the full model can run in parts (disjoint seeds, several processes or sessions) and be merged into
+one table: ``python scripts/soak.py --merge runs/soak_fe_a runs/soak_fe_b --out runs/soak_fe``.
+
 ``batched`` flies the fast fidelity's vector env (:mod:`kite_env.envs.vector`, 64 kites in one compiled batch,
 autoreset): the first episode of kite ``i`` starts from ``reset(seed=seed + i)``, later ones from the kite's own
 draws, the actions of all kites from one generator seeded ``seed``; episodes are counted as they end, until
@@ -125,9 +128,37 @@ def _summary(fidelity, rows, seed, episodes, duration_s, overrides, wall_s) -> d
             "wall_s": wall_s, "overrides": list(overrides)}
 
 
+def merge(results: list[dict]) -> dict:
+    """One result of several soaks of the same fidelity, episode length and overrides over disjoint seeds (a long
+    soak of the full model run in parts); the wall time is the parts' sum. Raises ``ValueError`` otherwise."""
+    if not results:
+        raise ValueError("nothing to merge")
+    first = results[0]
+    for r in results[1:]:
+        for k in ("fidelity", "duration_s", "overrides"):
+            if r[k] != first[k]:
+                raise ValueError(f"soaks differ in {k}: {first[k]!r} and {r[k]!r}")
+    spans = sorted(tuple(r["seeds"]) for r in results)
+    for (a0, a1), (b0, b1) in zip(spans, spans[1:]):
+        if b0 <= a1:
+            raise ValueError(f"seed ranges overlap: {a0}-{a1} and {b0}-{b1}")
+    ends: Counter = Counter()
+    for r in results:
+        ends.update(r["ends"])
+    return {"fidelity": first["fidelity"], "episodes": sum(r["episodes"] for r in results),
+            "seeds": [spans[0][0], spans[-1][1]], "seed_ranges": [list(s) for s in spans],
+            "duration_s": first["duration_s"], "steps": sum(r["steps"] for r in results),
+            "non_finite_steps": sum(r["non_finite_steps"] for r in results),
+            "exceptions": [e for r in results for e in r["exceptions"]], "ends": dict(ends),
+            "wall_s": sum(r["wall_s"] for r in results), "overrides": first["overrides"]}
+
+
 def soak_table(result: dict) -> str:
     n = result["episodes"]
-    lines = [f"| {result['fidelity']}: {n} random-action episodes of up to {result['duration_s']:g} s | episodes |",
+    s0, s1 = result["seeds"]
+    seeds = f", seeds {s0}-{s1}" if result["fidelity"] != "batched" else ""
+    title = f"{result['fidelity']}: {n} random-action episodes of up to {result['duration_s']:g} s{seeds}"
+    lines = [f"| {title} | episodes |",
              "|---|---:|"]
     for end, k in sorted(result["ends"].items(), key=lambda kv: -kv[1]):
         lines.append(f"| {end} | {k} |")
@@ -145,4 +176,4 @@ def write(result: dict, out: str | Path) -> Path:
     return out
 
 
-__all__ = ["soak", "soak_table", "write"]
+__all__ = ["merge", "soak", "soak_table", "write"]

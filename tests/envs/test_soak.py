@@ -51,3 +51,22 @@ def test_an_exception_of_the_batch_is_counted_not_raised(monkeypatch):
     res = soak.soak("batched", 10, duration_s=1.0)
     assert res["ends"] == {"exception": 1}
     assert res["exceptions"][0]["exception"] == "FloatingPointError: forced by the test"
+
+
+def test_soaks_flown_in_parts_merge_into_one_table(tmp_path, load_script):
+    """Two parts over disjoint seeds add up episode by episode; overlapping seeds or another fidelity are refused
+    with exit 2 and nothing written."""
+    mod = load_script("soak")
+    a, b, out = tmp_path / "a", tmp_path / "b", tmp_path / "all"
+    assert mod.main(["--fidelity", "surrogate", "--episodes", "2", "--duration", "1", "--out", str(a)]) == 0
+    assert mod.main(["--fidelity", "surrogate", "--episodes", "3", "--seed", "2", "--duration", "1",
+                     "--out", str(b)]) == 0
+    parts = [json.loads((d / "soak.json").read_text()) for d in (a, b)]
+    assert mod.main(["--merge", str(b), str(a), "--out", str(out)]) == 0
+    res = json.loads((out / "soak.json").read_text())
+    assert res["episodes"] == 5 and res["seeds"] == [0, 4] and res["seed_ranges"] == [[0, 1], [2, 4]]
+    assert res["steps"] == parts[0]["steps"] + parts[1]["steps"]
+    assert sum(res["ends"].values()) == 5
+    assert (out / "soak.md").read_text().startswith("| surrogate: 5 random-action episodes of up to 1 s, seeds 0-4")
+    assert mod.main(["--merge", str(a), str(a), "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x").exists()
