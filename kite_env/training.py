@@ -1,7 +1,9 @@
 """Training setup of ``kite-train`` (Stable-Baselines3): the recipes (shipped in ``agents/recipes``, read as data),
 their hyperparameters and config layers, the vectorised training and evaluation envs (with the report of a
 ``subproc`` worker's numerical failure) and the checkpoints of a run folder. :mod:`kite_env.cli.train` (one run) and
-:mod:`kite_env.cli.optimize` (a hyperparameter study) both build their runs from here.
+:mod:`kite_env.cli.optimize` (a hyperparameter study) both build their runs from here. The choice of the checkpoint
+to ship on validation seeds and its copy into ``agents/models`` (:func:`select_checkpoint`, :func:`ship`; the
+project's seed ranges are in the former's docstring) are ``kite-train select``.
 """
 
 from __future__ import annotations
@@ -302,3 +304,214 @@ def training_config(args) -> tuple:
     cfg = config_from_dict(parse_overrides(args.set), cfg)
     cfg = config_from_dict({"sim": {"fidelity": fidelity}}, cfg)
     return cfg, env_id, hp
+
+
+# --------------------------------------------------------------------------- choosing and shipping a checkpoint
+#: the first validation seed of :func:`select_checkpoint` (the project's seed ranges: its docstring)
+SELECTION_SEED = 30_000
+#: what :func:`ship` copies from the run folder next to the chosen checkpoint
+SHIPPED_FILES = ("model.json", "config.yml", "args.yml", "command.txt", "selection.json")
+
+
+def run_checkpoints(run_dir: Path) -> list[tuple[int, Path, Path]]:
+    """(steps, model zip, vecnormalize pkl) of every checkpoint of the run folder ``run_dir`` saved with its
+    normalisation, by steps."""
+    found = [(n, p, checkpoint_vecnormalize(p.parent, n)) for n, p in checkpoints(Path(run_dir) / "checkpoints")]
+    return [c for c in found if c[2].is_file()]
+
+
+def validate(env, agent, seeds) -> dict:
+    """Mean/std return, mean flight time and crashes of ``agent`` over one episode of ``env`` per seed
+    (``reset(seed=s)``, deterministic actions)."""
+    import numpy as np
+
+    from kite_env.flight import is_crash, run_episode
+
+    rets, times, crashes = [], [], 0
+    for s in seeds:
+        _, info = run_episode(env, agent, seed=int(s), record=False)
+        rets.append(info["episode_return"])
+        times.append(info["episode_steps"] * env.control_dt)
+        crashes += is_crash(info["termination_reason"])
+    return {"mean_return": float(np.mean(rets)), "std_return": float(np.std(rets)),
+            "flight_time_mean_s": float(np.mean(times)), "crashes": int(crashes), "episodes": len(seeds)}
+
+
+def select_checkpoint(run_dir: str | Path, episodes: int = 16, seed: int = SELECTION_SEED, every: int = 1,
+                      min_steps: int = 0, duration: float | None = None, on_row=None) -> dict:
+    """Pick the checkpoint of a ``kite-train`` run to ship: the best mean return on validation seeds.
+
+    Every checkpoint ``RUN_DIR/checkpoints/model_<N>_steps.zip`` (with its ``model_vecnormalize_<N>_steps.pkl``) of
+    at least ``min_steps`` training steps, every ``every``-th counted from the newest, flies ``episodes`` episodes
+    with deterministic actions in the run's own environment (``RUN_DIR/config.yml``: the training recipe's
+    randomised wind, turbulence and start; ``duration`` [s] shortens its episodes), episode ``i`` from
+    ``reset(seed=seed + i)``; the paper's controller flies the same episodes for reference. The seeds of the
+    project's evaluations are disjoint, so that each stays an honest test of the checkpoint chosen here:
+
+    =============  ==================================================================
+    0 - 9,999      kite-train's training episodes (``--seed`` and its env seeds)
+    10,000 +       kite-train's periodic evaluations (``EvalCallback``)
+    20,000 +       ``kite-train --optimize``'s validation of each trial
+    30,000 +       this selection (default, ``kite-train select``)
+    50,000 +       the held-out evaluation in the full model (README, "Agents")
+    70,000 +       the policy benchmark of the tests (tests/agents/test_policy_benchmark.py)
+    =============  ==================================================================
+
+    Returns what it writes to ``RUN_DIR/selection.json``: ``{"run", "validation_seeds": [first, last],
+    "best_steps", "rows"}``, one row per policy flown (``checkpoint``: ``baseline`` or the steps, ``steps``,
+    ``model``, and :func:`validate`'s numbers), the baseline first; the best is the checkpoint row of the highest
+    mean return (:func:`best_row`). ``on_row(row)`` is called as each row is done. A folder that is not a run, no
+    checkpoint with its normalisation, or ``episodes`` / ``every`` below 1 raise :class:`UsageError` before anything
+    is flown or written.
+    """
+    import dataclasses
+    import json
+
+    run = Path(run_dir)
+    if episodes < 1 or every < 1:
+        raise UsageError("--episodes and --every must be at least 1")
+    cfg_path = run / "config.yml"
+    if not cfg_path.is_file():
+        raise UsageError(f"'{run}' is not a kite-train run folder ({cfg_path} missing)")
+    ckpts = [c for c in run_checkpoints(run) if c[0] >= min_steps][::-1][::every][::-1]
+    if not ckpts:
+        raise UsageError(f"no checkpoints with their normalisation in '{run / 'checkpoints'}'")
+
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.policies import load_model_agent, make_agent
+
+    cfg = load_config(cfg_path)
+    # the run's environment as it trained: its randomised draws, its start rule, its episode length
+    env_cfg = dataclasses.replace(cfg.env, randomize=True)
+    if duration is not None:
+        env_cfg = dataclasses.replace(env_cfg, max_episode_s=duration)
+    cfg = dataclasses.replace(cfg, env=env_cfg)
+    env = KiteFigureEightEnv(config=cfg)
+    seeds = range(seed, seed + episodes)
+    rows = [{"checkpoint": "baseline", "steps": None, **validate(env, make_agent("baseline", env), seeds)}]
+    if on_row is not None:
+        on_row(rows[-1])
+    for n, zp, vn in ckpts:
+        agent = load_model_agent(zp, env, vecnormalize=vn)
+        rows.append({"checkpoint": str(n), "steps": n, "model": f"checkpoints/{zp.name}",
+                     **validate(env, agent, seeds)})
+        if on_row is not None:
+            on_row(rows[-1])
+    env.close()
+    best = max(rows[1:], key=lambda r: r["mean_return"])
+    result = {"run": run.name, "validation_seeds": [seed, seed + episodes - 1], "best_steps": best["steps"],
+              "rows": rows}
+    (run / "selection.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def best_row(selection: dict) -> dict:
+    """The row of the chosen checkpoint of a :func:`select_checkpoint` result (``selection.json``)."""
+    return next(r for r in selection["rows"] if r["steps"] is not None and r["steps"] == selection["best_steps"])
+
+
+def ship(run_dir: str | Path, dest: str | Path, force: bool = False) -> Path:
+    """Copy the checkpoint chosen by :func:`select_checkpoint` (``RUN_DIR/selection.json``) into ``dest`` as
+    ``model.zip`` + ``vecnormalize.pkl`` with the run's :data:`SHIPPED_FILES` (the model it was trained on, its config,
+    arguments, command line and the selection): what ``kite-eval --policy NAME`` loads from ``agents/models/NAME``.
+    The folder is assembled beside ``dest`` and renamed into place; an existing ``dest`` is replaced only with
+    ``force`` (else :class:`UsageError`, nothing written)."""
+    import json
+    import shutil
+
+    run, dest = Path(run_dir), Path(dest)
+    if dest.exists() and not force:
+        raise UsageError(f"'{dest}' exists (use --force to replace it)")
+    sel = run / "selection.json"
+    if not sel.is_file():
+        raise UsageError(f"'{sel}' missing: choose a checkpoint first (kite-train select)")
+    best = best_row(json.loads(sel.read_text()))
+    tmp = dest.with_name(dest.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    ckpt = run / best["model"]
+    shutil.copy(ckpt, tmp / "model.zip")
+    shutil.copy(checkpoint_vecnormalize(ckpt.parent, best["steps"]), tmp / "vecnormalize.pkl")
+    for name in SHIPPED_FILES:
+        if (run / name).is_file():
+            shutil.copy(run / name, tmp / name)
+    shutil.rmtree(dest, ignore_errors=True)
+    tmp.rename(dest)
+    return dest
+
+
+# --------------------------------------------------------------------------------------------- learning curves
+def read_monitor(path: str | Path) -> tuple:
+    """Episode returns of a (Vec)Monitor file and the training steps at which each episode ended (cumulative
+    episode lengths over all envs), as two arrays."""
+    import numpy as np
+
+    data = np.genfromtxt(path, delimiter=",", skip_header=2, usecols=(0, 1), ndmin=2)
+    if data.size == 0:
+        return np.zeros(0), np.zeros(0)
+    return data[:, 0], np.cumsum(data[:, 1])
+
+
+def plot_learning_curves(runs, out_png: str | Path) -> list[str]:
+    """Three panels for the ``kite-train`` run folders ``runs``: the evaluation returns against training steps (mean
+    and std over the evaluation episodes, ``RUN/eval/evaluations.npz``), the training episode returns
+    (``RUN/monitor.csv``, with their moving average) and, where ``kite-train select`` ran, the checkpoints' validation
+    returns with the baseline's on the same episodes (``RUN/selection.json``); written to ``out_png``. Returns the
+    runs that had none of these files."""
+    import json
+
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_e, ax_t, ax_v) = plt.subplots(1, 3, figsize=(16, 4), constrained_layout=True)
+    missing = []
+    for k, run in enumerate(Path(r) for r in runs):
+        color = f"C{k % 10}"
+        found = False
+        ev = run / "eval" / "evaluations.npz"
+        if ev.is_file():
+            d = np.load(ev)
+            steps, res = d["timesteps"], np.asarray(d["results"], dtype=float).reshape(len(d["timesteps"]), -1)
+            mean, std = res.mean(axis=1), res.std(axis=1)
+            ax_e.plot(steps, mean, "o-", color=color, label=run.name)
+            ax_e.fill_between(steps, mean - std, mean + std, color=color, alpha=0.2)
+            found = True
+        mon = run / "monitor.csv"
+        if mon.is_file():
+            ret, steps = read_monitor(mon)
+            if ret.size:
+                n = max(1, ret.size // 20)
+                ax_t.plot(steps, ret, ".", color=color, alpha=0.15, ms=2)
+                ax_t.plot(steps[n - 1:], np.convolve(ret, np.ones(n) / n, mode="valid"), color=color,
+                          label=f"{run.name} (mean of {n})")
+            found = True
+        sel = run / "selection.json"
+        if sel.is_file():
+            d = json.loads(sel.read_text())
+            rows = [r for r in d["rows"] if r.get("steps") is not None]
+            base = [r for r in d["rows"] if r.get("checkpoint") == "baseline"]
+            lo, hi = d["validation_seeds"]
+            ax_v.plot([r["steps"] for r in rows], [r["mean_return"] for r in rows], "o-", color=color,
+                      label=f"{run.name} (seeds {lo}-{hi}); best {d['best_steps']:,}")
+            if base:
+                ax_v.axhline(base[0]["mean_return"], color=color, ls="--", lw=1,
+                             label=f"baseline on {run.name}'s seeds")
+            found = True
+        if not found:
+            missing.append(str(run))
+    ax_e.set(xlabel="training steps", ylabel="episode return", title="evaluation (held-out seeds, deterministic)")
+    ax_t.set(xlabel="training steps (cumulative episode lengths)", ylabel="episode return",
+             title="training episodes (monitor.csv)")
+    ax_v.set(xlabel="training steps", ylabel="mean episode return", title="checkpoint validation (kite-train select)")
+    for ax in (ax_e, ax_t, ax_v):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=120)
+    plt.close(fig)
+    return missing

@@ -363,6 +363,60 @@ def test_batched_run_resumes_from_its_checkpoint(batched_runs):
     assert 32 < sum(lengths) <= 64
 
 
+def test_select_validates_every_checkpoint_and_ships_the_best(batched_runs, tmp_path, capsys):
+    """``kite-train select``: the baseline and every checkpoint fly the same validation episodes (seeds 30000 and
+    up) in the run's environment; one row each, ``selection.json`` names the best mean return, ``--ship`` copies it
+    with the run's records into a folder kite-eval loads; bad input is exit 2 with nothing written."""
+    import json
+    import shutil
+
+    from kite_env.cli import eval as eval_cli
+
+    base, _ = batched_runs
+    run = tmp_path / "ppo_a"
+    shutil.copytree(base / "ppo_a", run)
+    dest = tmp_path / "models" / "ppo"
+    assert train_cli.main(["select", str(run), "--episodes", "2", "--duration", "0.2", "--ship", str(dest)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["checkpoint", "mean", "return", "std", "flight", "[s]", "crashes"]
+    assert [ln.split()[0] for ln in out[1:4]] == ["baseline", "32", "64"]
+    assert out[4].startswith("best: ") and out[5] == f"shipped -> {dest}"
+    sel = json.loads((run / "selection.json").read_text())
+    assert sel["run"] == "ppo_a" and sel["validation_seeds"] == [30000, 30001]
+    rows = sel["rows"]
+    assert [r["checkpoint"] for r in rows] == ["baseline", "32", "64"] and rows[0]["steps"] is None
+    assert all(r["episodes"] == 2 and 0.0 < r["flight_time_mean_s"] <= 0.2 + 1e-9 for r in rows)
+    best = max(rows[1:], key=lambda r: r["mean_return"])
+    assert sel["best_steps"] == best["steps"] and train_cli.best_row(sel) == best
+    assert out[4].startswith(f"best: {best['steps']} steps, mean return {best['mean_return']:.1f} (baseline")
+    assert f"{best['mean_return']:>12.1f}" in out[1 + rows.index(best)]
+    ckpt = run / "checkpoints"
+    assert (dest / "model.zip").read_bytes() == (ckpt / f"model_{best['steps']}_steps.zip").read_bytes()
+    assert (dest / "vecnormalize.pkl").read_bytes() == (
+        ckpt / f"model_vecnormalize_{best['steps']}_steps.pkl").read_bytes()
+    assert sorted(p.name for p in dest.iterdir()) == sorted(
+        ["model.zip", "vecnormalize.pkl", "model.json", "config.yml", "args.yml", "command.txt", "selection.json"])
+    assert not dest.with_name("ppo.tmp").exists()
+    assert eval_cli.main(["--policy", str(dest / "model.zip"), "--fidelity", "surrogate", "--duration", "0.1",
+                          "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    # every k-th checkpoint counted from the newest; the same seeds give the same numbers
+    assert train_cli.main(["select", str(run), "--episodes", "2", "--duration", "0.2", "--every", "2"]) == 0
+    again = json.loads((run / "selection.json").read_text())["rows"]
+    assert [r["checkpoint"] for r in again] == ["baseline", "64"] and again == [rows[0], rows[2]]
+    capsys.readouterr()
+    # bad input: exit 2, one error line, nothing written
+    before = (dest / "model.zip").stat().st_mtime_ns
+    assert train_cli.main(["select", str(run), "--ship", str(dest)]) == 2
+    assert "exists (use --force" in capsys.readouterr().err and (dest / "model.zip").stat().st_mtime_ns == before
+    assert train_cli.main(["select", str(run), "--min-steps", "100"]) == 2
+    assert "no checkpoints" in capsys.readouterr().err
+    assert train_cli.main(["select", str(tmp_path / "models"), "--episodes", "1"]) == 2
+    assert "not a kite-train run folder" in capsys.readouterr().err
+    assert train_cli.main(["select", str(run), "--episodes", "0"]) == 2
+    assert "at least 1" in capsys.readouterr().err
+    assert again == json.loads((run / "selection.json").read_text())["rows"]
+
+
 def test_batched_sac_with_held_out_evaluations(tmp_path):
     from stable_baselines3 import SAC
 

@@ -2,6 +2,9 @@
 
     kite-train --algo ppo|sac --timesteps N --out runs/ppo [--recipe FILE] [--config FILE] [--set section.key=value ...]
                [--fidelity surrogate|fe] [--n-envs K] [--vec-env batched|subproc|dummy] [--seed S] [--resume]
+    kite-train select RUN_DIR [--episodes 16] [--seed 30000] [--every 1] [--min-steps 0] [--duration S]
+               [--ship agents/models/NAME] [--force]
+    kite-train curves RUN_DIR [RUN_DIR ...] --out DIR
 
 ``--config`` is the physics and task config (YAML, as in ``kite-eval`` and ``kite-bench``; default: the flying
 model), ``--set`` overrides any of its keys, ``--recipe`` the training recipe (default: the one shipped for the
@@ -31,6 +34,18 @@ the wing with inertia (:class:`~kite_env.dynamics.simulator.NumericalFailure`, a
 this process (``dummy``) or in a ``subproc`` worker (which writes it into ``OUT/.worker_failures`` before it ends:
 the worker prints its traceback, this process reads the failure back) saves a checkpoint too and exits with status 3
 and the failure's message.
+
+``kite-train select`` picks the checkpoint of a run to ship: every checkpoint (with its normalisation) flies
+validation episodes in the run's own randomised environment (seeds 30000 and up), the paper's controller the same
+ones for reference; it prints one row per checkpoint, writes ``RUN_DIR/selection.json`` and, with ``--ship DIR``,
+copies the best checkpoint with the run's model, config and command into ``DIR`` (what ``kite-eval --policy NAME``
+loads from ``agents/models/NAME``): :func:`kite_env.training.select_checkpoint` (the project's seed ranges) and
+:func:`kite_env.training.ship`.
+
+``kite-train curves`` plots the learning curves of runs into ``DIR/learning_curves.png``: evaluation returns against
+training steps (``RUN_DIR/eval/evaluations.npz``), training episode returns (``RUN_DIR/monitor.csv``) and the
+checkpoints' validation returns of ``kite-train select`` (``RUN_DIR/selection.json``)
+(:func:`kite_env.training.plot_learning_curves`).
 """
 
 from __future__ import annotations
@@ -50,6 +65,7 @@ from kite_env.training import (
     _META_KEYS,
     ALGOS,
     EVAL_SEED_OFFSET,
+    SELECTION_SEED,
     VEC_ENVS,
     WORKER_FAILURES,
     UsageError,
@@ -59,12 +75,15 @@ from kite_env.training import (
     _vec_env,
     _vec_env_kind,
     _worker_failure,
+    best_row,
     checkpoint_vecnormalize,
     checkpoints,
     default_recipe,
     load_hyperparameters,
     recipe_overrides,
     schedules,
+    select_checkpoint,
+    ship,
     training_config,
 )
 
@@ -242,7 +261,9 @@ def _has_rich() -> bool:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="kite-train", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="kite-train", description=__doc__.split("\n\n")[0],
+                                epilog="subcommands: 'kite-train select --help' (choose and ship a checkpoint), "
+                                "'kite-train curves --help' (learning curves of runs)")
     p.add_argument("--algo", required=True, choices=ALGOS)
     p.add_argument("--timesteps", type=int, required=True, help="total environment steps")
     p.add_argument("--out", required=True, help="run folder")
@@ -273,7 +294,80 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def build_select_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="kite-train select", description="Pick the checkpoint of a kite-train run to "
+                                "ship: the best mean return on validation seeds (kite_env.training.select_checkpoint).")
+    p.add_argument("run", type=Path, help="kite-train output folder (checkpoints/, config.yml)")
+    p.add_argument("--episodes", type=int, default=16)
+    p.add_argument("--seed", type=int, default=SELECTION_SEED,
+                   help=f"first validation seed (default {SELECTION_SEED})")
+    p.add_argument("--duration", type=float, default=None, help="episode length [s] (default: the run's)")
+    p.add_argument("--every", type=int, default=1, help="validate every k-th checkpoint (default all)")
+    p.add_argument("--min-steps", type=int, default=0, help="skip checkpoints before this many training steps")
+    p.add_argument("--ship", type=Path, default=None, help="copy the best checkpoint into this folder")
+    p.add_argument("--force", action="store_true", help="replace an existing --ship folder")
+    return p
+
+
+def select(argv) -> int:
+    """``kite-train select``: exit status 0, or 2 for bad input (nothing flown or written)."""
+    p = build_select_parser()
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
+        return int(exc.code or 0)
+    if args.ship is not None and args.ship.exists() and not args.force:
+        print(f"kite-train select: error: '{args.ship}' exists (use --force to replace it)", file=sys.stderr)
+        return 2
+
+    def show(r: dict) -> None:  # one row as each is done, under the header (printed with the first)
+        if r["checkpoint"] == "baseline":
+            print(f"{'checkpoint':<12} {'mean return':>12} {'std':>8} {'flight [s]':>11} {'crashes':>8}")
+        print(f"{r['checkpoint']:<12} {r['mean_return']:>12.1f} {r['std_return']:>8.1f} "
+              f"{r['flight_time_mean_s']:>11.2f} {r['crashes']:>5}/{r['episodes']}", flush=True)
+
+    try:
+        result = select_checkpoint(args.run, args.episodes, args.seed, args.every, args.min_steps, args.duration,
+                                   on_row=show)
+    except (UsageError, ConfigError) as exc:
+        print(f"kite-train select: error: {exc}", file=sys.stderr)
+        return 2
+    best, base = best_row(result), result["rows"][0]
+    print(f"best: {best['steps']} steps, mean return {best['mean_return']:.1f} "
+          f"(baseline {base['mean_return']:.1f}) -> {args.run / 'selection.json'}")
+    if args.ship is not None:
+        ship(args.run, args.ship, force=True)  # (an existing folder without --force was refused above)
+        print(f"shipped -> {args.ship}")
+    return 0
+
+
+def curves(argv) -> int:
+    """``kite-train curves``: the learning curves of runs (module docstring); exit status 0, 2 for bad input."""
+    p = argparse.ArgumentParser(prog="kite-train curves", description="Plot the learning curves of kite-train runs "
+                                "into DIR/learning_curves.png: evaluation returns, training episode returns and the "
+                                "checkpoints' validation returns (kite-train select).")
+    p.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR", help="kite-train run folders")
+    p.add_argument("--out", required=True, type=Path, help="folder for learning_curves.png")
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
+        return int(exc.code or 0)
+    from kite_env.training import plot_learning_curves
+
+    png = args.out / "learning_curves.png"
+    for run in plot_learning_curves(args.runs, png):
+        print(f"kite-train curves: warning: {run}: no eval/evaluations.npz, monitor.csv or selection.json",
+              file=sys.stderr)
+    print(f"kite-train curves: wrote {png}")
+    return 0
+
+
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["select"]:
+        return select(argv[1:])
+    if argv[:1] == ["curves"]:
+        return curves(argv[1:])
     args = build_parser().parse_args(argv)
     if args.timesteps <= 0:
         print(f"kite-train: error: --timesteps must be positive, got {args.timesteps}", file=sys.stderr)
@@ -307,9 +401,9 @@ def main(argv=None) -> int:
 
 
 #: the command's own names, and the training setup's names it hands on (kite_env.training)
-__all__ = ["ENV_ID", "FAST_ENV_ID", "UsageError", "build_parser", "checkpoint_vecnormalize", "checkpoints",
-           "default_recipe", "load_hyperparameters", "main", "recipe_overrides", "schedules", "train",
-           "training_config"]
+__all__ = ["ENV_ID", "FAST_ENV_ID", "UsageError", "best_row", "build_parser", "build_select_parser",
+           "checkpoint_vecnormalize", "checkpoints", "curves", "default_recipe", "load_hyperparameters", "main",
+           "recipe_overrides", "schedules", "select", "select_checkpoint", "ship", "train", "training_config"]
 
 
 if __name__ == "__main__":
