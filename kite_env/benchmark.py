@@ -1,8 +1,13 @@
-"""Speed benchmark of the static aeroelastic wing (cold solve, warm time steps, resolution study).
+"""Speed benchmarks of ``kite-bench`` (:mod:`kite_env.cli.bench`): the environments on one core and the static wing.
 
-A *warm step* is what the flight-dynamics integrator asks of the wing at every time step: new bridle-point
-positions ``q_b`` and a new flight state, solved from the previous step's shape. The benchmark drives the wing
-through a steering manoeuvre sampled at the paper's mean RK45 step (5.3 ms): the rear bridle points B and D move
+:func:`bench_env` times env steps of one fidelity under the paper's controller (the full model's wall time per
+simulated second and its Newton iterations per physics step; a time step other than the default is ``--set
+dynamics.dt_s=...``), :func:`bench_batched` the fast fidelity's vector env, :func:`bench_wing` the static aeroelastic
+wing alone at several mesh resolutions (:func:`bench_resolution`).
+
+A *warm step* of the static wing is what the flight-dynamics integrator asks of the wing at every time step: new
+bridle-point positions ``q_b`` and a new flight state, solved from the previous step's shape. The benchmark drives the
+wing through a steering manoeuvre sampled at the paper's mean RK45 step (5.3 ms): the rear bridle points B and D move
 up and down in opposite phase (0.02 m amplitude, 2 s period), the kite angle of attack varies by +-0.5 deg and the
 kite yaws at up to 0.2 rad/s, starting from the converged nominal state (25 m/s, alpha_k = 16 deg). Steps that
 fail to converge are counted (``failed_steps``) and the wing is reset to the last converged state.
@@ -15,7 +20,6 @@ import time
 import numpy as np
 
 from kite_env.config import Config
-from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 
 PAPER_STEP_S = 5.3e-3  # mean RK45 step of the paper (Sect. IV) [s]
 PAPER_WALL_PER_STEP_MS = 27.5 / (1.0 / PAPER_STEP_S) * 1e3  # 27.5 s wall per s of flight -> ms per step
@@ -49,6 +53,7 @@ def write_json(out_dir, name: str, result: dict) -> None:
 def bench_resolution(kite: str, n_sections: int, n_chord: int, n_steps: int = 100, cfg: Config | None = None,
                      airspeed: float = 25.0, alpha_deg: float = 16.0) -> dict:
     """Time one cold solve and ``n_steps`` warm steps of one mesh resolution."""
+    from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
     from kite_env.geometry import build_kite
 
     cfg = cfg or Config()
@@ -112,49 +117,82 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-# ---------------------------------------------------------------------------------------------- whole flight model
-PAPER_REAL_TIME_FACTOR = 27.5  # wall seconds per simulated second of the paper's Matlab model (Sect. III)
+#: the static wing's default mesh resolutions (sections x chord points); 37 x 6 is the model's own
+WING_RESOLUTIONS = ((21, 4), (37, 6), (51, 8))
 
 
-def bench_flight(cfg: Config | None = None, duration_s: float = 3.0, dt_values=(5e-3, 1e-2)) -> list[dict]:
-    """Real-time factor of the baseline figure-eight in the full model (wing + particles + controller + logging).
+def bench_wing(kite: str = "rhino16", resolutions=WING_RESOLUTIONS, n_steps: int = 100, progress=None) -> dict:
+    """One cold solve and ``n_steps`` warm steps of the static wing of ``kite`` per ``(sections, chord points)`` of
+    ``resolutions`` (:func:`bench_resolution`); ``progress(kite, sections, chord)`` is called before each. Returns
+    the row of the default resolution 37 x 6 (the first row without it) with ``resolutions`` (all rows), the paper's
+    wall time per step and the machine."""
+    import platform
 
-    For each time step in ``dt_values`` the baseline flies ``duration_s`` from the crossing point after a short
-    untimed flight (numba compilation and caches). Wall time per simulated second is measured on the whole
-    :func:`kite_env.flight.fly` call except its initial cold wing solve (reset), and per step for the simulator
-    step (wing solve + RK4) from the flight log. A flight that ends early (the wing fails) is timed up to its end
-    and flagged.
-    """
-    import dataclasses
-
-    from kite_env.flight import fly
-
-    cfg = cfg or Config()
-    fly(cfg, None, 0.05)  # warm-up: compile and load the numba kernels
     rows = []
-    for dt in dt_values:
-        c = dataclasses.replace(cfg, dynamics=dataclasses.replace(cfg.dynamics, dt_s=float(dt)))
-        log = fly(c, None, duration_s)
-        sim_t = float(log.meta["sim_time_s"])
-        step_wall = np.asarray(log.series["wall_time"], dtype=float)[1:]  # step k's wall time is logged at k + 1
-        reset_wall = float(log.meta["wall_time_s"]) - float(np.sum(step_wall))  # reset, control, logging
-        rows.append({
-            "dt_ms": 1e3 * dt, "sim_time_s": sim_t, "completed": log.meta["termination_reason"] == "completed",
-            "wall_time_s": float(log.meta["wall_time_s"]),
-            "real_time_factor": float(log.meta["wall_time_s"]) / sim_t if sim_t > 0 else float("nan"),
-            "step_ms_median": 1e3 * float(np.median(step_wall)),
-            "step_ms_p90": 1e3 * float(np.percentile(step_wall, 90)),
-            "other_wall_s": reset_wall,
-        })
-    return rows
+    for ns, nc in resolutions:
+        if progress is not None:
+            progress(kite, ns, nc)
+        rows.append(bench_resolution(kite, ns, nc, n_steps=n_steps))
+    default = next((r for r in rows if (r["n_sections"], r["n_chord"]) == (37, 6)), rows[0])
+    return {**default, "resolutions": rows, "paper_wall_per_step_ms": PAPER_WALL_PER_STEP_MS,
+            "machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}}
 
 
-def format_flight_table(rows: list[dict]) -> str:
-    cols = [("dt_ms", "time step [ms]", ".1f"), ("sim_time_s", "simulated [s]", ".2f"),
-            ("wall_time_s", "wall [s]", ".1f"), ("real_time_factor", "wall / simulated", ".2f"),
-            ("step_ms_median", "step median [ms]", ".1f"), ("step_ms_p90", "step p90 [ms]", ".1f"),
-            ("other_wall_s", "reset + control + logging [s]", ".1f")]
-    lines = ["| " + " | ".join(c[1] for c in cols) + " |", "|" + "|".join("---:" for _ in cols) + "|"]
-    for r in rows:
-        lines.append("| " + " | ".join(format(r[c[0]], c[2]) for c in cols) + " |")
-    return "\n".join(lines)
+# ---------------------------------------------------------------------------------------------- the environments
+def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe", config=None) -> dict:
+    """Time ``n_steps`` env steps of KiteFigureEight-v1 in ``fidelity`` driven by the baseline agent (``config``: a
+    YAML path or None for the defaults, then ``overrides``). The env is reset (timed separately) and then stepped
+    with the paper's controller, so that the flight is the one users see; an episode that ends early is reset and the
+    count goes on."""
+    from kite_env.envs.figure_eight import KiteFigureEightEnv
+    from kite_env.policies.baseline import BaselineAgent
+
+    env = KiteFigureEightEnv(config=config, overrides=overrides, fidelity=fidelity)
+    agent = BaselineAgent(env.cfg)
+    t0 = time.perf_counter()
+    obs, _ = env.reset(seed=seed)
+    t_reset = time.perf_counter() - t0
+    start, wall, steps, resets = True, 0.0, 0, 0
+    newton = []
+    while steps < n_steps:
+        a, _ = agent.predict(obs, episode_start=start)
+        start = False
+        t0 = time.perf_counter()
+        obs, _, term, trunc, info = env.step(a)
+        wall += time.perf_counter() - t0
+        newton += info.get("newton_iters", [])
+        steps += 1
+        if term or trunc:
+            obs, _ = env.reset(seed=seed + resets + 1)
+            resets += 1
+            start = True
+    sim = steps * env.control_dt
+    out = {"env_steps_per_s": steps / wall, "real_time_factor": wall / sim, "steps": steps,
+           "control_dt_s": env.control_dt, "reset_s": t_reset, "resets_during_run": resets}
+    if newton:  # the full model's wing: Newton iterations per physics step
+        out.update(newton_iters_mean=float(np.mean(newton)), newton_iters_p99=float(np.percentile(newton, 99)),
+                   newton_iters_max=int(np.max(newton)))
+    return out
+
+
+def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: int = 0, config=None) -> dict:
+    """Time ``n_steps`` steps of the batched env (``n_kites`` kites in the surrogate fidelity, one process) with
+    random actions; kite-steps per second = ``n_kites * n_steps / wall``."""
+    import gymnasium as gym
+
+    import kite_env  # noqa: F401  (registers the envs)
+
+    env = gym.make_vec("KiteFigureEightFast-v1", num_envs=n_kites, vectorization_mode="vector_entry_point",
+                       config=config, overrides=list(overrides))
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    wall = 0.0
+    for _ in range(n_steps):
+        a = rng.uniform(-0.3, 0.3, (n_kites, 1)).astype(np.float32)
+        t0 = time.perf_counter()
+        env.step(a)
+        wall += time.perf_counter() - t0
+    control_dt = env.unwrapped.control_dt if hasattr(env.unwrapped, "control_dt") else 0.02
+    env.close()
+    return {"n_kites": n_kites, "kite_steps_per_s": n_kites * n_steps / wall, "steps": n_steps,
+            "real_time_factor": wall / (n_kites * n_steps * control_dt)}

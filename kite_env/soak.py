@@ -1,8 +1,8 @@
 """Soak: many random-action episodes of an environment, checking that every step is finite and nothing raises.
 
-    python scripts/soak.py --fidelity surrogate --episodes 10000 --jobs 2 --out runs/soak_fast
-    python scripts/soak.py --fidelity fe --episodes 100 --jobs 2 --out runs/soak_fe
-    python scripts/soak.py --fidelity batched --episodes 10000 --out runs/soak_batched
+    kite-bench soak --fidelity surrogate --episodes 10000 --jobs 2 --out runs/soak_fast
+    kite-bench soak --fidelity fe --episodes 100 --jobs 2 --out runs/soak_fe
+    kite-bench soak --fidelity batched --episodes 10000 --out runs/soak_batched
 
 An episode flies random actions (uniform in [-1, 1], a new one every control step, seeded by the episode) in the
 conditions the training recipes draw (:data:`kite_env.fitting.agreement.RANDOM_CONDITIONS`: wind 4-10 m/s,
@@ -11,7 +11,7 @@ turbulence up to 0.1, starts on the straight parts at 4.0-4.8 times the wind), e
 full model included) is caught, counted and its message kept. The table counts the episodes by how they ended.
 
 A long soak of the full model can run in parts (disjoint seeds, several processes or sessions) and be merged into
-one table: ``python scripts/soak.py --merge runs/soak_fe_a runs/soak_fe_b --out runs/soak_fe``.
+one table: ``kite-bench soak --merge runs/soak_fe_a runs/soak_fe_b --out runs/soak_fe``.
 
 ``batched`` flies the fast fidelity's vector env (:mod:`kite_env.envs.vector`, 64 kites in one compiled batch,
 autoreset): the first episode of kite ``i`` starts from ``reset(seed=seed + i)``, later ones from the kite's own

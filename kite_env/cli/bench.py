@@ -1,85 +1,49 @@
 """``kite-bench --out DIR``: environment steps per second and real-time factor on one core, per fidelity.
 
+    kite-bench --out DIR [--fidelity fe|surrogate|batched ...] [--steps N] [--fast-steps N] [--n-kites K]
+               [--config FILE] [--set section.key=value ...]
+    kite-bench wing --out DIR [--kite rhino16] [--steps 100] [--resolutions 21x4,37x6,51x8]
+    kite-bench soak --fidelity surrogate|fe|batched --episodes N [--seed 0] [--duration 30] [--jobs 1]
+               [--set section.key=value ...] --out DIR
+    kite-bench soak --merge DIR [DIR ...] --out DIR
+
 Prints a table and writes ``DIR/bench.json`` as ``{"fe": {"env_steps_per_s": ..., "real_time_factor": ...},
 "surrogate": {...}, "batched": {"n_kites": 64, "kite_steps_per_s": ...}}`` (``fe``: the aeroelastic FE wing;
 ``surrogate``: the reduced-order wing, ``KiteFigureEightFast-v1``; ``batched``: the vector env of the surrogate
 fidelity, all kites in one process)
 (real-time factor = wall seconds per simulated second, as ``kite-eval``; below 1 is faster than real time). The env
 is reset (timed separately) and then stepped with the paper's controller, so that the flight is the one users see;
-an episode that ends early is reset and the count goes on.
+an episode that ends early is reset and the count goes on (:func:`kite_env.benchmark.bench_env`). Another time step
+of the full model: ``--set dynamics.dt_s=0.01``.
+
+``kite-bench wing`` times the static aeroelastic wing alone (one cold solve, warm steps of a steering manoeuvre at
+the paper's 5.3 ms step) at several mesh resolutions, prints a table and writes ``DIR/bench_wing.json``
+(:func:`kite_env.benchmark.bench_wing`).
+
+``kite-bench soak`` flies random actions in the training conditions and checks every step for finite values
+(:mod:`kite_env.soak`), writes ``DIR/soak.json`` and ``DIR/soak.md`` and prints the table; ``--merge`` joins soaks
+flown in parts over disjoint seeds into one. Exit status 0 when no step was non-finite and nothing raised, 1
+otherwise, 2 for bad input (nothing written).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import time
 
-import numpy as np
-
+from kite_env.benchmark import bench_batched, bench_env
 from kite_env.config import ConfigError
 
 
-def bench_env(n_steps: int = 100, overrides=(), seed: int = 0, fidelity: str = "fe", config=None) -> dict:
-    """Time ``n_steps`` env steps of KiteFigureEight-v1 in ``fidelity`` driven by the baseline agent (``config``: a
-    YAML path or None for the defaults, then ``overrides``)."""
-    from kite_env.envs.figure_eight import KiteFigureEightEnv
-    from kite_env.policies.baseline import BaselineAgent
-
-    env = KiteFigureEightEnv(config=config, overrides=overrides, fidelity=fidelity)
-    agent = BaselineAgent(env.cfg)
-    t0 = time.perf_counter()
-    obs, _ = env.reset(seed=seed)
-    t_reset = time.perf_counter() - t0
-    start, wall, steps, resets = True, 0.0, 0, 0
-    newton = []
-    while steps < n_steps:
-        a, _ = agent.predict(obs, episode_start=start)
-        start = False
-        t0 = time.perf_counter()
-        obs, _, term, trunc, info = env.step(a)
-        wall += time.perf_counter() - t0
-        newton += info.get("newton_iters", [])
-        steps += 1
-        if term or trunc:
-            obs, _ = env.reset(seed=seed + resets + 1)
-            resets += 1
-            start = True
-    sim = steps * env.control_dt
-    out = {"env_steps_per_s": steps / wall, "real_time_factor": wall / sim, "steps": steps,
-           "control_dt_s": env.control_dt, "reset_s": t_reset, "resets_during_run": resets}
-    if newton:  # the full model's wing: Newton iterations per physics step
-        out.update(newton_iters_mean=float(np.mean(newton)), newton_iters_p99=float(np.percentile(newton, 99)),
-                   newton_iters_max=int(np.max(newton)))
-    return out
-
-
-def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: int = 0, config=None) -> dict:
-    """Time ``n_steps`` steps of the batched env (``n_kites`` kites in the surrogate fidelity, one process) with
-    random actions; kite-steps per second = ``n_kites * n_steps / wall``."""
-    import gymnasium as gym
-    import numpy as np
-
-    import kite_env  # noqa: F401  (registers the envs)
-
-    env = gym.make_vec("KiteFigureEightFast-v1", num_envs=n_kites, vectorization_mode="vector_entry_point",
-                       config=config, overrides=list(overrides))
-    rng = np.random.default_rng(seed)
-    env.reset(seed=seed)
-    wall = 0.0
-    for _ in range(n_steps):
-        a = rng.uniform(-0.3, 0.3, (n_kites, 1)).astype(np.float32)
-        t0 = time.perf_counter()
-        env.step(a)
-        wall += time.perf_counter() - t0
-    control_dt = env.unwrapped.control_dt if hasattr(env.unwrapped, "control_dt") else 0.02
-    env.close()
-    return {"n_kites": n_kites, "kite_steps_per_s": n_kites * n_steps / wall, "steps": n_steps,
-            "real_time_factor": wall / (n_kites * n_steps * control_dt)}
-
-
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="kite-bench", description=__doc__.split("\n\n")[0])
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["soak"]:
+        return soak(argv[1:])
+    if argv[:1] == ["wing"]:
+        return wing(argv[1:])
+    p = argparse.ArgumentParser(prog="kite-bench", description=__doc__.split("\n\n")[0],
+                                epilog="subcommands: 'kite-bench wing --help' (the static wing), 'kite-bench soak "
+                                "--help' (random-action episodes, every step checked)")
     p.add_argument("--out", required=True, help="folder for bench.json")
     p.add_argument("--steps", type=int, default=150, help="env steps of the fe fidelity (default 150 = 3 s of flight)")
     p.add_argument("--fast-steps", type=int, default=3000,
@@ -122,6 +86,133 @@ def main(argv=None) -> int:
     write_json(args.out, "bench.json", result)
     print(f"kite-bench: wrote {args.out}/bench.json")
     return 0
+
+
+def _parse(p: argparse.ArgumentParser, argv):
+    """``p.parse_args(argv)``, or the exit status of ``--help`` (0) or of a parse error (2, message printed)."""
+    try:
+        return p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+
+def wing(argv) -> int:
+    """``kite-bench wing``: the static aeroelastic wing on one core (module docstring)."""
+    from kite_env.benchmark import WING_RESOLUTIONS
+
+    default = ",".join(f"{ns}x{nc}" for ns, nc in WING_RESOLUTIONS)
+    p = argparse.ArgumentParser(prog="kite-bench wing", description="Benchmark of the static aeroelastic wing on one "
+                                "core: a cold solve and warm steps per mesh resolution; prints a table and writes "
+                                "DIR/bench_wing.json.")
+    p.add_argument("--out", required=True, help="output folder for bench_wing.json")
+    p.add_argument("--kite", default="rhino16")
+    p.add_argument("--steps", type=int, default=100, help="warm steps per resolution (default 100)")
+    p.add_argument("--resolutions", default=default,
+                   help=f"comma-separated SECTIONSxCHORD list (default {default}); the table's summary row is 37x6")
+    args = _parse(p, argv)
+    if isinstance(args, int):
+        return args
+    try:
+        res = [tuple(int(v) for v in r.split("x")) for r in args.resolutions.split(",")]
+        if any(len(r) != 2 for r in res):
+            raise ValueError
+    except ValueError:
+        print(f"kite-bench wing: error: --resolutions must look like {default}, got {args.resolutions!r}",
+              file=sys.stderr)
+        return 2
+    if args.steps < 1:
+        print("kite-bench wing: error: --steps must be >= 1", file=sys.stderr)
+        return 2
+    from pathlib import Path
+
+    from kite_env.benchmark import PAPER_WALL_PER_STEP_MS, bench_wing, format_table, pin_to_one_core, write_json
+    from kite_env.geometry import KITES
+
+    if args.kite not in KITES:
+        print(f"kite-bench wing: error: unknown kite {args.kite!r} (valid: {', '.join(sorted(KITES))})",
+              file=sys.stderr)
+        return 2
+    pin_to_one_core()
+    result = bench_wing(args.kite, res, args.steps,
+                        progress=lambda kite, ns, nc: print(f"kite-bench wing: {kite} {ns}x{nc} ...", flush=True))
+    write_json(args.out, "bench_wing.json", result)
+    print(format_table(result["resolutions"]))
+    print(f"paper (Matlab, RK45 mean step 5.3 ms): {PAPER_WALL_PER_STEP_MS:.0f} ms wall per step; "
+          f"target: warm step < 5 ms at 37x6")
+    print(f"kite-bench wing: wrote {Path(args.out) / 'bench_wing.json'}")
+    return 0
+
+
+def soak(argv) -> int:
+    """``kite-bench soak``: random-action episodes, every step checked (module docstring, :mod:`kite_env.soak`)."""
+    p = argparse.ArgumentParser(prog="kite-bench soak", description="Soak an environment with random actions (every "
+                                "observation and reward checked for finite values, every exception counted) and "
+                                "print the table; writes DIR/soak.json and DIR/soak.md.",
+                                epilog="exit status: 0 no non-finite step and no exception, 1 otherwise, 2 bad input "
+                                "(nothing written)")
+    p.add_argument("--fidelity", choices=("surrogate", "fe", "batched"),
+                   help="surrogate / fe: the single env of that wing; batched: the fast fidelity's vector env")
+    p.add_argument("--episodes", type=int)
+    p.add_argument("--merge", nargs="+", metavar="DIR", help="merge these soaks (disjoint seeds) into one table")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, default=30.0)
+    p.add_argument("--jobs", type=int, default=1)
+    p.add_argument("--out", required=True)
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    args = _parse(p, argv)
+    if isinstance(args, int):
+        return args
+    if args.merge:
+        return _merge(args.merge, args.out)
+
+    def fail(msg: str) -> int:
+        print(f"kite-bench soak: error: {msg}", file=sys.stderr)
+        return 2
+
+    if args.fidelity is None or args.episodes is None:
+        return fail("--fidelity and --episodes are required (or --merge DIR ...)")
+    if args.episodes < 1 or args.jobs < 1 or args.duration <= 0:
+        return fail("--episodes and --jobs must be >= 1 and --duration > 0")
+    from kite_env.config import load_config
+    from kite_env.soak import soak as fly_soak, soak_table, write
+
+    try:
+        load_config(None, args.set)
+    except ConfigError as exc:
+        return fail(str(exc))
+    result = fly_soak(args.fidelity, args.episodes, args.seed, args.duration, args.jobs, args.set)
+    write(result, args.out)
+    print(soak_table(result), end="")
+    for row in result["exceptions"][:5]:
+        print(f"seed {row['seed']}: {row['exception']}", file=sys.stderr)
+    return 0 if not result["exceptions"] and not result["non_finite_steps"] else 1
+
+
+def _merge(dirs, out) -> int:
+    import json
+    from pathlib import Path
+
+    from kite_env.soak import merge, soak_table, write
+
+    parts = []
+    for d in dirs:
+        f = Path(d) / "soak.json"
+        if not f.is_file():
+            print(f"kite-bench soak: error: {f} does not exist (not a soak folder)", file=sys.stderr)
+            return 2
+        parts.append(json.loads(f.read_text()))
+    try:
+        result = merge(parts)
+    except ValueError as exc:
+        print(f"kite-bench soak: error: {exc}", file=sys.stderr)
+        return 2
+    write(result, out)
+    print(soak_table(result), end="")
+    return 0 if not result["exceptions"] and not result["non_finite_steps"] else 1
+
+
+#: the command's own names, and the benchmarks it hands on (kite_env.benchmark)
+__all__ = ["bench_batched", "bench_env", "main", "soak", "wing"]
 
 
 if __name__ == "__main__":
