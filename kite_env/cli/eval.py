@@ -6,6 +6,10 @@ Examples::
               [--seed N] [--episodes N] [--randomize] [--force] [--quiet]
     kite-eval --policy random | constant:0 | runs/ppo/model.zip --episodes 3 --out runs/random
     kite-eval --compare baseline random constant:0 runs/ppo/model.zip --episodes 2 --out runs/compare
+    kite-eval end-reasons --episodes 50 --duration 30 --jobs 2 --out runs/end_reasons [--policy random]
+              [--seed 0] [--fidelity fe|surrogate] [--config FILE] [--set section.key=value ...]
+    kite-eval benchmark --out runs/benchmark [--policies baseline ppo sac random] [--episodes 20] [--seed 1000]
+              [--fidelity surrogate fe] [--duration S] [--recipe agents/recipes/ppo.yaml] [--set k=v ...] [--force]
 
 Every policy flies through the Gymnasium environment ``KiteFigureEight-v1`` (:func:`kite_env.flight.run_episode`):
 ``baseline`` (the paper's controller), ``random``, ``constant:<a>`` (a normalised action in [-1, 1]) or the path
@@ -29,6 +33,22 @@ A run writes into ``--out``:
 ``--compare A B ...`` evaluates each policy (or reads an existing ``kite-eval`` run folder) into ``OUT/<name>/`` and
 writes ``OUT/compare.md`` and ``OUT/compare.csv``: the policies side by side (return, crashes, tracking, traction,
 figure-eights, L/D, speed).
+
+``kite-eval end-reasons`` counts why randomised episodes end (:func:`kite_env.evaluation.end_reasons`): the
+episodes of ``kite-eval --randomize`` (by default winds 4-10 m/s, turbulence up to 0.15 and starts anywhere on the
+figure-eight, each overridable with ``--set``), each alone in a fresh env, ``--jobs`` processes at a time (episode
+``i`` has seed ``seed + i``). It writes ``episodes.csv``, ``end_reasons.md`` (the table, also printed) and, for an
+episode that failed numerically, ``failures/seed_N.log`` (the failure's message with the wing solver's residual
+history) under ``--out``. A numerical failure of the wing with inertia is counted as "numerical failure" at the time
+it happened and makes the exit status 3; a start that does not converge is exit 1 (nothing written), bad input 2.
+
+``kite-eval benchmark`` flies ``--policies`` through ``kite-eval --compare`` with ``--randomize`` in the conditions
+of a training recipe (the ``env`` overrides of its ``KiteFigureEightFast-v1`` entry; default the shipped
+``agents/recipes/ppo.yaml``), one comparison per ``--fidelity`` into ``OUT/<fidelity>/`` (episode ``i``: seed
+``seed + i``, held out), and writes ``OUT/benchmark.md``, rl-baselines3-zoo's table (algo, env_id, mean_reward,
+std_reward, n_timesteps, eval_episodes; ``n_timesteps`` the model's training steps) with physical metrics added
+(tracking error RMS, mean tether force, crashes, mean flight time), and ``OUT/benchmark.json`` with the same rows
+(:mod:`kite_env.evaluation`). A shipped name without its model is left out with a warning.
 
 Everything is written into a temporary sibling folder that is renamed to ``--out`` only when complete, so a failed
 or interrupted run (Ctrl-C) leaves nothing half-written. An existing non-empty ``--out`` is refused unless
@@ -59,16 +79,13 @@ from pathlib import Path
 import numpy as np
 
 from kite_env.config import FIDELITIES
+from kite_env.evaluation import evaluate_episode, write_rows
 
 PROG = "kite-eval"
 
 
 #: policies by name; a model file path and ``constant:<value>`` are accepted too (:mod:`kite_env.policies`)
 POLICIES = ("baseline", "random", "constant:<value>", "ppo", "sac", "<path to model.zip>")
-#: per-episode columns of ``episodes.csv`` / ``episode_rows`` taken from the episode's metrics
-EPISODE_METRICS = ("sim_time_s", "crashed", "termination_reason", "figure_eights_completed", "tracking_error_rms_deg",
-                   "tether_force_mean_N", "tether_force_max_N", "kite_speed_min_mps", "kite_speed_max_mps",
-                   "lift_to_drag_mean", "alpha_mid_mean_deg", "real_time_factor", "substepped_steps")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -84,7 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
                 "series and the paper's Sect. IV figures into --out.",
                 epilog="exit status: 0 results written (also when the kite crashed: see metrics.json), "
                 "1 no start converged, 2 bad input (nothing written), 3 numerical failure of the simulator (a bug; "
-                "nothing written), 130 interrupted (nothing written)")
+                "nothing written), 130 interrupted (nothing written). subcommands: 'kite-eval end-reasons --help' "
+                "(why randomised episodes end), 'kite-eval benchmark --help' (rl-zoo table of policies)")
     what = p.add_mutually_exclusive_group()
     what.add_argument("--policy", default="baseline",
                       help="policy to fly: baseline, random, constant:<a> (a in [-1, 1]), ppo / sac (the shipped "
@@ -111,8 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _fail(msg: str) -> int:
-    print(f"{PROG}: error: {msg}", file=sys.stderr)
+def _fail(msg: str, prog: str = PROG) -> int:
+    print(f"{prog}: error: {msg}", file=sys.stderr)
     return 2
 
 
@@ -220,17 +238,11 @@ def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
 
 def _evaluate(job: _Job, args, progress) -> tuple:
     """Fly ``args.episodes`` episodes; returns (log of the first episode, its metrics, episode rows)."""
-    from kite_env.flight import run_episode
-    from kite_env.metrics import compute_metrics
-
-    cfg = job.cfg
-    seed = cfg.wind.seed  # --seed, applied as wind.seed (main)
+    seed = job.cfg.wind.seed  # --seed, applied as wind.seed (main)
     first_log, first_metrics, rows = None, None, []
     for i in range(args.episodes):
         options = None if args.randomize else {"wind_seed": seed + i}
-        log, info = run_episode(job.env, job.agent, seed=seed + i, options=options, progress=progress)
-        m = compute_metrics(log, cfg)
-        row = {"episode": i, "seed": seed + i, **info, **{k: m[k] for k in EPISODE_METRICS}}
+        log, m, row = evaluate_episode(job.env, job.agent, seed + i, i, options=options, progress=progress)
         rows.append(row)
         if i == 0:
             first_log, first_metrics = log, m
@@ -244,19 +256,6 @@ def _episode_stats(rows: list[dict]) -> dict:
             "episode_return_std": float(ret.std()) if len(rows) > 1 else 0.0}
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    import csv
-
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
-
-
 def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], argv: list[str]) -> dict:
     import yaml
 
@@ -268,7 +267,7 @@ def _write_run(folder: Path, job: _Job, log, metrics: dict, rows: list[dict], ar
            "episode_return": rows[0]["episode_return"], **_episode_stats(rows), "episode_rows": rows}
     with open(folder / "metrics.json", "w") as fh:
         json.dump(out, fh, indent=2, allow_nan=False)
-    _write_csv(folder / "episodes.csv", rows)
+    write_rows(folder / "episodes.csv", rows)
     with open(folder / "config.yaml", "w") as fh:
         yaml.safe_dump(job.cfg.to_dict(), fh, sort_keys=False)
     (folder / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
@@ -350,6 +349,10 @@ def _labels(specs: list[str]) -> list[str]:
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["end-reasons"]:
+        return end_reasons(argv[1:])
+    if argv[:1] == ["benchmark"]:
+        return benchmark(argv[1:])
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
@@ -430,7 +433,7 @@ def main(argv=None) -> int:
         if args.compare:
             md, rows = compare_table(results, header)
             (tmp / "compare.md").write_text(md)
-            _write_csv(tmp / "compare.csv", rows)
+            write_rows(tmp / "compare.csv", rows)
             (tmp / "command.txt").write_text(shlex.join([PROG, *argv]) + "\n")
         if bar is not None:
             bar.close()
@@ -474,6 +477,142 @@ def main(argv=None) -> int:
                 print(f"  episodes: {m['episodes']}, return {m['episode_return_mean']:.4g} +- "
                       f"{m['episode_return_std']:.3g}")
         print(f"{PROG}: wrote {', '.join(sorted(p.name for p in out.iterdir()))} to {out}")
+    return 0
+
+
+def build_end_reasons_parser() -> argparse.ArgumentParser:
+    from kite_env.evaluation import END_REASON_RANGES
+
+    p = _Parser(prog=f"{PROG} end-reasons", description="Count why randomised episodes end: the episodes of kite-eval "
+                "--randomize, each alone in a fresh env, --jobs processes at a time; writes episodes.csv, "
+                "end_reasons.md and failures/seed_N.log into --out.",
+                epilog=f"conditions before --set: {' '.join(END_REASON_RANGES)}. exit status: 0 counted, 3 counted "
+                "with a numerical failure of the simulator (a bug), 1 a start did not converge (nothing written), 2 "
+                "bad input (nothing written)")
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--duration", type=float, default=30.0, help="simulated time per episode [s] (default 30)")
+    p.add_argument("--jobs", type=int, default=2, help="episodes flown at a time, one process each (default 2)")
+    p.add_argument("--policy", default="random", help="as kite-eval --policy (default random)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--config", default=None, help="physics and task config YAML (default: the flying model)")
+    p.add_argument("--fidelity", choices=FIDELITIES, default=None, help="wing model (default: the config's, fe)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    return p
+
+
+def end_reasons(argv) -> int:
+    """``kite-eval end-reasons`` (module docstring): exit status 0, 3 with a numerical failure, 1 when a start did not
+    converge, 2 for bad input; nothing written but with 0 or 3."""
+    prog = f"{PROG} end-reasons"
+    p = build_end_reasons_parser()
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    if args.episodes < 1 or args.jobs < 1 or not (math.isfinite(args.duration) and args.duration > 0):
+        return _fail("--episodes and --jobs must be >= 1 and --duration > 0", prog)
+    if args.config is not None and not Path(args.config).is_file():
+        return _fail(f"--config file {args.config!r} does not exist", prog)
+    from kite_env.envs.figure_eight import StartError
+    from kite_env.evaluation import end_reasons as count, write_end_reasons
+
+    overrides = [*args.overrides, *([f"sim.fidelity={args.fidelity}"] if args.fidelity else [])]
+    try:
+        result = count(args.episodes, args.seed, args.duration, args.policy, overrides, args.jobs, args.config)
+    except StartError as exc:
+        print(f"{prog}: error: {exc}; nothing written", file=sys.stderr)
+        return 1
+    except ValueError as exc:  # ConfigError and PolicyError
+        return _fail(str(exc), prog)
+    write_end_reasons(result, args.out)
+    print(result["table"])
+    return 3 if result["failures"] else 0
+
+
+#: the policies ``kite-eval benchmark`` flies by default
+BENCHMARK_POLICIES = ("baseline", "ppo", "sac", "random")
+
+
+def build_benchmark_parser() -> argparse.ArgumentParser:
+    from kite_env.evaluation import BENCHMARK_ENV_IDS
+    from kite_env.training import default_recipe
+
+    p = _Parser(prog=f"{PROG} benchmark", description="Benchmark policies against each other on held-out seeds in a "
+                "training recipe's randomised conditions: rl-baselines3-zoo's benchmark.md with physical metrics "
+                "added.")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--policies", nargs="+", default=list(BENCHMARK_POLICIES),
+                   help=f"default: {' '.join(BENCHMARK_POLICIES)}")
+    p.add_argument("--episodes", type=int, default=20, help="episodes per policy and fidelity (default 20)")
+    p.add_argument("--seed", type=int, default=1000, help="seed of the first episode (default 1000, held out)")
+    p.add_argument("--fidelity", nargs="+", choices=tuple(BENCHMARK_ENV_IDS), default=["surrogate"],
+                   help="wing models to fly (default: surrogate)")
+    p.add_argument("--duration", type=float, default=None, help="episode time limit [s] (default: sim.duration_s)")
+    p.add_argument("--recipe", type=Path, default=default_recipe("ppo"),
+                   help="training recipe whose KiteFigureEightFast-v1 env overrides set the conditions (default: the "
+                   "shipped agents/recipes/ppo.yaml)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="further config overrides (after the recipe's)")
+    p.add_argument("--force", action="store_true", help="replace existing kite-eval folders in OUT")
+    return p
+
+
+def benchmark(argv) -> int:
+    """``kite-eval benchmark`` (module docstring): exit status 0, or 2 for bad input or a failed kite-eval."""
+    from kite_env.evaluation import benchmark_row, benchmark_table, recipe_env
+
+    prog = f"{PROG} benchmark"
+    p = build_benchmark_parser()
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    from kite_env.policies import SHIPPED, shipped_model
+    from kite_env.training import UsageError
+
+    policies, skipped = [], []
+    for spec in args.policies:
+        if spec in SHIPPED and not shipped_model(spec).is_file():
+            print(f"{prog}: warning: policy {spec!r} left out: no shipped model at '{shipped_model(spec)}'",
+                  file=sys.stderr)
+            skipped.append(spec)
+        else:
+            policies.append(spec)
+    if not policies:
+        return _fail("no policy to evaluate", prog)
+    try:
+        overrides = [*recipe_env(args.recipe), *args.set]
+    except (UsageError, ValueError) as exc:
+        return _fail(str(exc), prog)
+    out = Path(args.out)
+    rows = []
+    for fidelity in args.fidelity:
+        argv = ["--compare", *policies, "--episodes", str(args.episodes), "--seed", str(args.seed), "--randomize",
+                "--fidelity", fidelity, "--out", str(out / fidelity), "--quiet"]
+        for o in overrides:
+            argv += ["--set", o]
+        if args.duration is not None:
+            argv += ["--duration", repr(float(args.duration))]
+        if args.force:
+            argv.append("--force")
+        if main(argv) != 0:
+            return 2  # kite-eval printed the reason
+        for spec, label in zip(policies, _labels(policies)):
+            metrics = json.loads((out / fidelity / label / "metrics.json").read_text())
+            rows.append(benchmark_row(label, spec, fidelity, metrics))
+    head = (f"Benchmark of {', '.join(policies)}: {args.episodes} episode(s) per policy and fidelity, "
+            f"seeds {args.seed}..{args.seed + args.episodes - 1}, randomised conditions ({', '.join(overrides)}).\n"
+            "mean_reward / std_reward: episode return over the episodes; the physical metrics are means over them.\n")
+    if skipped:
+        head += f"Left out (no shipped model): {', '.join(skipped)}.\n"
+    (out / "benchmark.md").write_text(benchmark_table(rows) + "\n" + head)
+    info = {"policies": policies, "skipped": skipped, "episodes": args.episodes, "seed": args.seed,
+            "fidelity": args.fidelity, "duration_s": args.duration, "overrides": overrides,
+            "recipe": str(args.recipe), "rows": rows}
+    (out / "benchmark.json").write_text(json.dumps(info, indent=2, allow_nan=False))
+    print(benchmark_table(rows), end="")
+    print(f"{prog}: wrote {out / 'benchmark.md'} and {out / 'benchmark.json'}")
     return 0
 
 

@@ -1,61 +1,24 @@
-"""scripts/end_reasons.py (its count of why episodes end), with a stand-in ``kite-eval``.
+"""``kite-eval end-reasons`` (kite_env.evaluation.end_reasons): its count of why randomised episodes end.
 
-The script runs one ``kite-eval`` per episode (the executable next to ``sys.executable``). A stand-in written here
-answers each seed as the real one would: an episode's ``episodes.csv`` and exit 0, or, for a numerical failure of
-the wing with inertia, kite-eval's error line and exit 3 (``NumericalFailure``; tests/test_eval_cli.py checks that
-line against the real kite-eval). What is checked is the script's own logic: the count, the kind, the time and wind
-of a failure read from the error line, its kept log, and the exit status.
+The episodes fly in the fast fidelity for speed. A numerical failure of the wing with inertia or a start that does not
+converge is forced by patching the env for one seed (``jobs`` 1: the episodes fly in this process); what is checked is
+the count's own logic: the count, the kind, the time and wind of a failure, its kept message, the exit status, and
+that its episodes are kite-eval's (``--randomize --seed``), alone or ``--jobs`` at a time.
 """
 
 from __future__ import annotations
 
 import csv
-import os
-import stat
-import sys
+import json
 from pathlib import Path
 
 import pytest
 
-STAND_IN = """#!{python}
-import sys
-from pathlib import Path
-args = sys.argv[1:]
-seed = int(args[args.index("--seed") + 1])
-out = Path(args[args.index("--out") + 1])
-if seed == {failing}:
-    sys.stderr.write("kite-eval: error: numerical failure at t = 7.2500 s (wind 8.123 m/s, turbulence 0.1000, wind "
-                     "seed 5, start s 0.1000, start speed 33.000 m/s): wing did not converge: forced; "
-                     "nothing written\\n"
-                     "this is a bug of the simulator, not an end of the flight\\nresidual history (last 1): test\\n")
-    sys.exit(3)
-if seed == {broken}:
-    sys.stderr.write("kite-eval: error: something else\\n")
-    sys.exit(1)
-out.mkdir(parents=True)
-reason = "ground" if seed % 2 else ""
-(out / "episodes.csv").write_text(
-    "episode,seed,wind_speed_mps,termination_reason,sim_time_s,failed_starts\\n"
-    f"0,{{seed}},{{4 + seed % 7}},{{reason}},{{3.5 if reason else 30.0}},0\\n")
-"""
+from kite_env.cli import eval as eval_cli
+from kite_env.envs.figure_eight import KiteFigureEightEnv, StartError
+from kite_env.evaluation import END_REASON_RANGES
 
-
-@pytest.fixture()
-def stand_in(tmp_path, monkeypatch):
-    """A folder with a ``python`` (this interpreter) and a stand-in ``kite-eval``, made ``sys.executable``'s folder."""
-
-    def make(failing: int = -1, broken: int = -1) -> None:
-        bin_dir = tmp_path / "bin"
-        bin_dir.mkdir(exist_ok=True)
-        exe = bin_dir / "kite-eval"
-        exe.write_text(STAND_IN.format(python=sys.executable, failing=failing, broken=broken))
-        exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
-        python = bin_dir / "python"
-        if not python.exists():
-            os.symlink(sys.executable, python)
-        monkeypatch.setattr(sys, "executable", str(python))
-
-    return make
+FAST = ["--fidelity", "surrogate", "--duration", "0.3"]
 
 
 def _rows(out: Path) -> list[dict]:
@@ -63,33 +26,100 @@ def _rows(out: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def test_a_numerical_failure_is_counted_with_its_time_and_wind_and_the_script_exits_3(load_script, stand_in,
-                                                                                      tmp_path, capsys):
-    stand_in(failing=301)
+@pytest.fixture()
+def seeded(monkeypatch):
+    """The env remembers the seed of its last reset (``_test_seed``)."""
+    reset = KiteFigureEightEnv.reset
+
+    def remember(self, *, seed=None, options=None):
+        self._test_seed = seed
+        return reset(self, seed=seed, options=options)
+
+    monkeypatch.setattr(KiteFigureEightEnv, "reset", remember)
+
+
+def test_a_numerical_failure_is_counted_with_its_time_and_wind_and_the_command_exits_3(seeded, monkeypatch,
+                                                                                       tmp_path, capsys):
+    from kite_env.dynamics.simulator import NumericalFailure, SimulationError
+
+    step = KiteFigureEightEnv.step
+
+    def failing(self, action):
+        if self._test_seed == 301 and self.steps == 5:
+            raise NumericalFailure(SimulationError("wing did not converge", "forced", "residual history (last 1): "
+                                                   "test"), 7.25, self._conditions())
+        return step(self, action)
+
+    monkeypatch.setattr(KiteFigureEightEnv, "step", failing)
     out = tmp_path / "er"
-    rc = load_script("end_reasons").main(["--episodes", "4", "--duration", "30", "--jobs", "2", "--seed", "300",
-                                          "--out", str(out)])
+    rc = eval_cli.main(["end-reasons", "--episodes", "4", "--jobs", "1", "--seed", "300", *FAST, "--out", str(out)])
     assert rc == 3
     rows = _rows(out)
-    assert [int(r["seed"]) for r in rows] == [300, 301, 302, 303]
+    assert [int(r["seed"]) for r in rows] == [300, 301, 302, 303] and [r["episode"] for r in rows] == list("0123")
     failed = rows[1]
-    assert failed["termination_reason"] == "numerical failure"
-    assert (float(failed["sim_time_s"]), float(failed["wind_speed_mps"])) == (7.25, 8.123)
+    assert failed["termination_reason"] == "numerical failure" and float(failed["sim_time_s"]) == 7.25
+    assert 4.0 <= float(failed["wind_speed_mps"]) <= 10.0
+    assert f"wind {float(failed['wind_speed_mps']):.3f} m/s" in (out / "failures" / "seed_301.log").read_text()
     assert "residual history (last 1): test" in (out / "failures" / "seed_301.log").read_text()
+    assert sorted(p.name for p in (out / "failures").iterdir()) == ["seed_301.log"]
     table = (out / "end_reasons.md").read_text()
+    assert table.startswith(f"4 episodes of 0.3 s, policy random, `{' '.join(END_REASON_RANGES)} "
+                            "sim.fidelity=surrogate`")
     assert "| numerical failure | 1 | numerical (a bug) | 7.25 | 7.25 |" in table
-    assert "| ground | 1 | physical | 3.50 | 3.50 |" in table  # seed 303 (301 failed)
-    assert "| time limit | 2 | none | 30.00 | 30.00 |" in table
+    others = [r for r in rows if r is not failed]
+    for reason in {r["termination_reason"] for r in others}:
+        n = sum(r["termination_reason"] == reason for r in others)
+        kind = "none" if reason == "completed" else "physical"
+        assert f"| {reason} | {n} | {kind} | " in table
+    winds = sorted(float(r["wind_speed_mps"]) for r in rows)
+    assert table.rstrip().endswith(f"wind {winds[0]:.1f}-{winds[-1]:.1f} m/s; starts that did not converge "
+                                   "(drawn again): 0")
     assert table in capsys.readouterr().out + "\n"
 
 
-def test_without_a_failure_the_script_exits_0_and_another_kite_eval_error_stops_it(load_script, stand_in, tmp_path,
-                                                                                   capsys):
-    stand_in()
-    out = tmp_path / "ok"
-    assert load_script("end_reasons").main(["--episodes", "3", "--jobs", "1", "--seed", "10", "--out", str(out)]) == 0
-    assert not (out / "failures").exists() and len(_rows(out)) == 3
-    stand_in(broken=11)
-    assert load_script("end_reasons").main(["--episodes", "3", "--jobs", "1", "--seed", "10", "--out",
-                                            str(tmp_path / "broken")]) == 1
-    assert "kite-eval failed for seed 11 (exit 1" in capsys.readouterr().err
+def test_a_start_that_does_not_converge_stops_the_count_and_bad_input_is_exit_2(monkeypatch, tmp_path, capsys):
+    reset = KiteFigureEightEnv.reset
+
+    def no_start(self, *, seed=None, options=None):
+        if seed == 11:
+            raise StartError("reset failed: the wing did not converge at the start (forced)")
+        return reset(self, seed=seed, options=options)
+
+    monkeypatch.setattr(KiteFigureEightEnv, "reset", no_start)
+    out = tmp_path / "x"
+    assert eval_cli.main(["end-reasons", "--episodes", "3", "--jobs", "1", "--seed", "10", *FAST,
+                          "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["kite-eval end-reasons: error: seed 11: reset failed: the wing did not converge at the start "
+                   "(forced); nothing written"]
+    for argv in (["--set", "env.nope=1"], ["--policy", "nope"], ["--episodes", "0"], ["--duration", "0"],
+                 ["--config", str(tmp_path / "none.yaml")]):
+        assert eval_cli.main(["end-reasons", "--jobs", "1", *FAST, *argv, "--out", str(out)]) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("kite-eval end-reasons: error: "), err
+    assert not out.exists()
+
+
+def test_the_episodes_are_kite_evals_alone_or_jobs_at_a_time(tmp_path, monkeypatch):
+    """Three episodes counted with two processes, with one, and flown by ``kite-eval --randomize --episodes 3`` in
+    one env: the same episodes (all columns but the wall time's), so a count splits its episodes freely."""
+    import kite_env.plots
+
+    monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
+    wall = "real_time_factor"
+    counts = []
+    for jobs in ("2", "1"):
+        out = tmp_path / f"jobs_{jobs}"
+        assert eval_cli.main(["end-reasons", "--episodes", "3", "--jobs", jobs, "--seed", "20", *FAST,
+                              "--out", str(out)]) == 0
+        assert not (out / "failures").exists()
+        counts.append([{k: v for k, v in r.items() if k != wall} for r in _rows(out)])
+    assert counts[0] == counts[1] and [r["seed"] for r in counts[0]] == ["20", "21", "22"]
+    sets = [a for s in END_REASON_RANGES for a in ("--set", s)]
+    ev = tmp_path / "eval"
+    assert eval_cli.main(["--policy", "random", "--randomize", "--episodes", "3", "--seed", "20", *FAST, *sets,
+                          "--out", str(ev), "--quiet"]) == 0
+    assert [{k: v for k, v in r.items() if k != wall} for r in _rows(ev)] == counts[0]
+    assert (tmp_path / "jobs_1" / "end_reasons.md").read_text() == (tmp_path / "jobs_2" / "end_reasons.md").read_text()
+    m = json.loads((ev / "metrics.json").read_text())
+    assert [r["termination_reason"] for r in m["episode_rows"]] == [r["termination_reason"] for r in counts[0]]
