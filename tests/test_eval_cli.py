@@ -284,7 +284,7 @@ def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
 
 def test_a_random_episode_does_not_depend_on_the_episodes_before_it():
     """RandomAgent is reseeded with each episode's seed by run_episode: episode 1 of a run is the episode flown
-    alone with its seed (scripts/end_reasons.py splits its episodes over processes by seed)."""
+    alone with its seed (kite-eval end-reasons flies each episode alone, by seed)."""
     from kite_env.policies import RandomAgent
 
     def returns(seeds):

@@ -53,7 +53,7 @@ def model_path(spec: str) -> Path | None:
 class RandomAgent:
     """Uniformly random actions in [-1, 1], from its own seeded generator; :func:`kite_env.flight.run_episode`
     reseeds it with the episode's seed (:meth:`seed_episode`), so an episode's actions do not depend on the episodes
-    flown before it (``kite-eval --episodes`` and ``scripts/end_reasons.py`` split over processes agree)."""
+    flown before it (``kite-eval --episodes`` and ``kite-eval end-reasons``, each episode in a fresh env, agree)."""
 
     def __init__(self, seed: int = 0):
         self.rng = np.random.default_rng(seed)

@@ -1,6 +1,6 @@
 """The policy benchmark: the shipped PPO agent against the paper's controller and a negative control, in the fast
 fidelity of the default model, on held-out seeds (70000 and up: used neither in training, nor in its evaluations,
-nor in the choice of the checkpoint; ``scripts/select_checkpoint.py`` lists the project's seed ranges).
+nor in the choice of the checkpoint; ``kite_env.training.select_checkpoint`` lists the project's seed ranges).
 
 Every policy flies the same episodes: one env, ``reset(seed=s)`` for each, so each seed's start (the start table's
 entry for the drawn wind, turbulence, start point and speed) is the same for all; the draws are those the agent was

@@ -163,7 +163,7 @@ def test_evaluation_conditions_use_the_wind_section_as_configured():
 def test_a_start_that_does_not_converge_is_drawn_again_and_counted():
     """A randomized reset whose wing does not converge at the drawn start draws new conditions (up to
     ``env.reset_attempts``); ``info["failed_starts"]`` counts those failures, so that they are not hidden
-    (``scripts/end_reasons.py`` sums them); with none left the reset raises, naming the start."""
+    (``kite-eval end-reasons`` sums them); with none left the reset raises, naming the start."""
     from kite_env.dynamics.simulator import SimulationError
 
     env = KiteFigureEightEnv(overrides=["env.reset_attempts=3"])
