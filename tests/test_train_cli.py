@@ -472,3 +472,36 @@ def test_two_optimize_workers_add_trials_to_one_sqlite_study(tmp_path):
     assert best["KiteFigureEightFast-v1"]["learning_rate"] == study.best_trial.params["learning_rate"]
     hp = train_cli.load_hyperparameters(out / "best_recipe.yaml", "ppo", train_cli.FAST_ENV_ID)
     assert hp["n_steps"] == study.best_trial.params["n_steps"] and hp["n_envs"] == 2
+
+
+def test_init_starts_a_new_run_from_a_trained_agent(tmp_path, capsys):
+    """``--init ppo``: the run starts from the shipped agent's weights (after one small update they are within 0.05 of
+    them, where a fresh network differs by its whole size) and its observation statistics; a model that is not there
+    or of the other algorithm is one error line, exit 2, nothing written."""
+    import pickle
+
+    from stable_baselines3 import PPO
+
+    from kite_env.policies import shipped_model
+
+    out = tmp_path / "run"
+    fast = ["--fidelity", "surrogate", "--n-envs", "1", "--set", "env.max_episode_s=0.4"]
+    hp = _hp(tmp_path, "ppo")
+    assert train_cli.main(["--algo", "ppo", "--timesteps", "16", "--out", str(out), "--recipe", hp, "--init", "ppo",
+                           *fast]) == 0
+    shipped = PPO.load(shipped_model("ppo"), device="cpu").policy.state_dict()
+    tuned = PPO.load(out / "model.zip", device="cpu").policy.state_dict()
+    assert shipped.keys() == tuned.keys()
+    assert max(float((shipped[k] - tuned[k]).abs().max()) for k in shipped) < 0.05
+    assert yaml.safe_load((out / "args.yml").read_text())["init"] == "ppo"
+    with open(shipped_model("ppo").with_name("vecnormalize.pkl"), "rb") as f:
+        mean0 = pickle.load(f).obs_rms.mean
+    with open(out / "vecnormalize.pkl", "rb") as f:
+        mean1 = pickle.load(f).obs_rms.mean
+    assert np.max(np.abs(mean1 - mean0)) < 0.05 * (np.max(np.abs(mean0)) + 1.0)
+    capsys.readouterr()
+    for bad, what in ((["--algo", "sac", "--init", "ppo"], "is a PPO model, not SAC"),
+                      (["--algo", "ppo", "--init", str(tmp_path / "none")], "no model")):
+        dest = tmp_path / f"bad_{len(what)}"
+        assert train_cli.main([*bad, "--timesteps", "16", "--out", str(dest), *fast]) == 2
+        assert what in capsys.readouterr().err and not dest.exists()

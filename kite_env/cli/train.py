@@ -109,6 +109,7 @@ def train(args) -> Path:
         raise UsageError(f"output folder '{out}' is not empty (use --resume to continue it or --force to overwrite)")
     if args.resume:  # the run goes on in the model it was trained on
         check_model(_read_json(out / "model.json"), cfg, f"run '{out}'")
+    init = _init_model(args, cfg) if getattr(args, "init", None) else None
     # the reduced-order wing must be this model's (one clear error, nothing written)
     if cfg.sim.fidelity == "surrogate":
         from kite_env.surrogate import surrogate_for
@@ -148,6 +149,18 @@ def train(args) -> Path:
     else:
         model = Algo(hp["policy"], venv, seed=args.seed, device="cpu", verbose=0,
                      tensorboard_log=str(out / "tb"), **kwargs)
+        if init is not None:  # fine-tuning: the policy, value function and optimiser of a trained agent
+            zip_path, vn = init
+            try:
+                model.set_parameters(str(zip_path), exact_match=True, device="cpu")
+            except (RuntimeError, ValueError) as exc:
+                raise UsageError(f"--init: '{zip_path}' does not fit this recipe's network: "
+                                 f"{str(exc).splitlines()[0]}") from None
+            if hp["normalize"] and vn.is_file():  # its observation statistics (the reward's adapt to the new task)
+                from stable_baselines3.common.vec_env import VecNormalize
+
+                venv.obs_rms = VecNormalize.load(str(vn), venv.venv).obs_rms
+            print(f"kite-train: starting from the weights of {zip_path}", file=sys.stderr)
     remaining = max(0, int(args.timesteps) - int(model.num_timesteps))
     freq = max(1, int(hp["checkpoint_freq"]) // n_envs)
     callbacks = [
@@ -202,6 +215,26 @@ def train(args) -> Path:
         venv.save(str(out / "vecnormalize.pkl"))
     save_checkpoint("done")
     return out / "model.zip"
+
+
+def _init_model(args, cfg) -> tuple[Path, Path]:
+    """``--init``: the model zip (a shipped name, a run folder or a zip) and its ``vecnormalize.pkl``, checked to be
+    an agent of ``--algo`` trained on this model (one clear error otherwise, before anything is written)."""
+    from kite_env.config import check_model
+    from kite_env.policies import PolicyError, model_algorithm, model_path, model_record
+
+    spec = str(args.init)
+    path = Path(spec) / "model.zip" if Path(spec).is_dir() else model_path(spec)
+    if path is None or not path.is_file():
+        raise UsageError(f"--init: no model '{spec}' (a shipped name, a kite-train run folder or a model.zip)")
+    try:
+        algo = model_algorithm(path)
+    except PolicyError as exc:
+        raise UsageError(f"--init: {exc}") from None
+    if algo != args.algo:
+        raise UsageError(f"--init: '{path}' is a {algo.upper()} model, not {args.algo.upper()}")
+    check_model(model_record(path), cfg, f"--init model '{path}'")
+    return path, path.with_name("vecnormalize.pkl")
 
 
 def _read_json(path: Path):
@@ -284,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wing model of the training env: surrogate (the reduced-order wing, KiteFigureEightFast-v1; "
                         "the default) or fe (the aeroelastic FE wing, KiteFigureEight-v1, about 100x slower)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT/checkpoints")
+    p.add_argument("--init", default=None, metavar="MODEL", help="start a new run from the weights (and observation "
+                   "statistics) of a trained agent of the same algorithm and model: a shipped name (ppo), a run "
+                   "folder or a model.zip; e.g. to fine-tune it on another reward")
     p.add_argument("--optimize", action="store_true", help="hyperparameter search: run --n-trials trials of the "
                    "Optuna study --study-name in --storage, each of --timesteps (kite_env.cli.optimize)")
     p.add_argument("--storage", default=None, help="--optimize: the study's RDB URL (default sqlite:///OUT/study.db; "
