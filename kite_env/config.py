@@ -5,8 +5,9 @@ a range, a check). These declarations are the single source of truth: the checks
 them, and ``configs/default.yaml`` and ``docs/configuration.md`` are generated from them
 (``python -m kite_env.config_reference --write``; a test fails when the committed files are not what it writes).
 
-Errors: an unknown section or key, a value of the wrong type, or a physically invalid value (negative stiffness,
-pressure, ...) raises :class:`ConfigError` with one message that names the offending key.
+Errors: an unknown section or key, a retired key (:data:`RETIRED`: one that only chose a former default), a value of
+the wrong type, or a physically invalid value (negative stiffness, pressure, ...) raises :class:`ConfigError` with one
+message that names the offending key.
 """
 
 from __future__ import annotations
@@ -151,21 +152,13 @@ class StructureConfig:
         2.0e5, "tube wall axial stiffness E*t (modelling choice)", "N/m", lo=0, lo_open=True,
         note="EA = pi d (E t)_fabric. No measured Dacron data is public: modelling choice of twice the canopy's "
              "membrane stiffness E h = 1e5 N/m (tube fabric is a heavier cloth)")
-    tube_curvature: str = key(
-        "element_energy", "curvature a tube element's Breukels law is taken at: element_energy (rms) | max_end "
-        "(the larger end curvature)", choices=("element_energy", "max_end"),
-        note="\"element_energy\" = the element's root-mean-square curvature (the law is then the gradient of a "
-             "stored energy, with an exact tangent; kite_env.structure.tube.element_curvature); \"max_end\" = the "
-             "larger end curvature (the former default: not the gradient of an energy, not conservative, its tangent "
-             "4 % off, and it over-softens an S-bent element: the folding struts of the high-wind random episodes; "
-             "docs/model.md, \"Energy\", \"The conservative tube law\")")
     tube_fold_onset_deg: float = key(
         90.0, "fold contact of a kinked tube from this element fold angle, closing at 180 deg; 0 = none", "deg",
         lo=0, hi=180, hi_open=True, range_note="0: no fold contact",
-        note="kite_env.structure.tube.fold_contact, with element_energy only: from this fold angle of an element (rms "
-             "curvature times length) its legs press on each other and the fold closes at 180 deg instead of passing "
-             "it (Breukels' collapsed tube is a hinge of no stiffness; the co-rotational element cannot represent a "
-             "fold of 180 deg: docs/model.md, \"Section frame, fold contact, rotary inertia\")")
+        note="kite_env.structure.tube.fold_contact, part of the conservative tube law: from this fold angle of an "
+             "element (rms curvature times length) its legs press on each other and the fold closes at 180 deg "
+             "instead of passing it (Breukels' collapsed tube is a hinge of no stiffness; the co-rotational element "
+             "cannot represent a fold of 180 deg: docs/model.md, \"Section frame, fold contact, rotary inertia\")")
     tip_rod_E_Pa: float = key(
         30.0e9, "tip rod Young's modulus (glass fibre, modelling choice)", "Pa", lo=0, lo_open=True,
         note="tip beams (\"thin stiff beam\", Sect. II.A): a solid glass-fibre rod (modelling choice), diameter from "
@@ -176,13 +169,6 @@ class StructureConfig:
              "awegroup/ASKITE)")
     te_hem_EI_Nm2: float = key(0.4, "bending stiffness of the trailing-edge hem (wire + seam tape), both axes "
                                "(modelling choice)", "N m^2", lo=0, lo_open=True)
-    te_hem_element: str = key(
-        "rod", "trailing-edge hem element: rod (frame-free) | beam (co-rotational)", choices=("beam", "rod"),
-        note="\"rod\" = a frame-free rod with the beam's axial, bending and (bounded) torsional stiffness "
-             "(kite_env.structure.hem); \"beam\" = the co-rotational beam of the tubes (the former default), whose "
-             "element frame and rotation logarithm are singular when a slack canopy turns its trailing-edge nodes by "
-             "90-180 deg against the hem: its energy jumps there, and the nodes' rotations spin up (docs/model.md, "
-             "\"The trailing-edge hem\")")
     dynamic: bool = key(
         True, "the wing with inertia (nodal + added mass, generalized-alpha); false = the paper's quasi-static wing",
         note="dynamics/wing_dynamics.py: nodal masses (Table 1's 10 kg, 70 % on the LE tube) and the canopy's added "
@@ -225,27 +211,15 @@ class StructureConfig:
              "membrane modes (a free wing gained 75 % of its kinetic energy in 0.3 s)")
     carry_residual: str = key(
         "sections", "wing with inertia: a step's unbalanced Newton residual carried into the next step's load: "
-        "sections (its resultant on each section) | full | none", choices=("sections", "full", "none"),
+        "sections (its resultant on each section) | full", choices=("sections", "full"),
         note="the force residual that a step's Newton leaves (below fsi.tol_force_rel of the load) is added to the "
              "next step's load, so that its impulse is delivered one step late instead of lost (the unbalanced force "
-             "correction). Dropped (\"none\"), every step's residual is a small force on the wing that the flight "
-             "integrates: the KCU lay 9.7 cm from the tightly converged flight after 10 s at 5 ms, 15 cm at 2.5 ms. "
+             "correction; dropped, every step's residual was a small force on the wing that the flight integrated: "
+             "the KCU lay 9.7 cm from the tightly converged flight after 10 s at 5 ms, 15 cm at 2.5 ms). "
              "\"sections\": the residual's resultant force and moments on each chordwise section, spread over its "
              "nodes like a rigid section's inertial load (1.4 cm, and Newton 1.59 instead of 1.68 iterations per "
              "step); \"full\": all of it (0.1 cm; 1.78 iterations: the part within a section is what a kept "
              "factorisation contracts worst) (docs/performance.md, \"The carried residual\")")
-    added_mass_force: str = key(
-        "normal_velocity_rate", "the added mass's force: normal_velocity_rate (Theodorsen: M_a a - m_a (dn/dt . "
-        "v_rel) n at 3/4 chord) | nodal_acceleration (M_a a alone)",
-        choices=("nodal_acceleration", "normal_velocity_rate"),
-        note="\"normal_velocity_rate\" = Theodorsen's non-circulatory load (NACA Report 496): the mass blocks M_a a "
-             "plus -m_a (n' . v_rel) n at the 3/4-chord point, so that a steady turn leaves only the pitch-damping "
-             "couple; \"nodal_acceleration\" = M_a a alone, which in a steady turn pulls each section with its added "
-             "mass times the turn's centripetal acceleration, as if the air turned with the wing. The normal-rate "
-             "part feeds the wing's 3.9 Hz yaw/twist mode at a lower structural damping (docs/steering.md, \"The yaw "
-             "rig\"; docs/model.md, \"Structural damping\"); with the damping at the wing's lowest mode, the hem's "
-             "frame-free rods and the force's Newton tangent (docs/model.md, \"Theodorsen's force\") it flies every "
-             "flight M_a a flies")
 
 
 @dataclass(frozen=True)
@@ -309,7 +283,6 @@ class FsiConfig:
     max_newton_iter: int = key(30, "monolithic Newton iterations per solve", "-", lo=0, lo_open=True)
     max_retries: int = key(3, "retries of a failed solve: fresh start, damped Newton, then finer bridle sub-steps",
                            "-", lo=0)
-    extrapolate: bool = key(True, "warm time steps start from the linear extrapolation of the last two steps")
 
 
 @dataclass(frozen=True)
@@ -398,21 +371,16 @@ class ControlConfig:
     beta_min: float = key(0.2, "blending: smallest weight of the path tangent", "-", lo=0, hi=1)
     control_dt_s: float = key(0.02, "controller update period", "s", lo=0, lo_open=True)
     line_speed_max_mps: float = key(
-        2.0, "speed limit of the KCU's steering-line actuator on each axis of actuator_axes; 0 = none (the paper's "
-        "Eq. 16-17)", "m/s", lo=0,
-        note="per controller period at most this times control_dt_s (kite_env.control.actuate). 2 m/s (the default "
-             "with the wing with inertia: a held full input otherwise moves the lines by metres in one controller "
-             "period) is above all the baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower "
-             "(docs/model.md, \"Large steering inputs\")")
-    actuator_axes: str = key(
-        "steer_depower", "how that limit acts: steer_depower (the KCU's steering and depower motors) | per_line (each "
-        "rest length on its own)", choices=("steer_depower", "per_line"),
-        note="\"steer_depower\" = as the KCU's two motors, a steering motor for the difference and a depower motor for "
-             "the common change of both lines (van der Vlugt et al., \"Design and experimental characterization of a "
+        2.0, "speed limit of each of the KCU's two motors: steering (half the difference of the steering lines' "
+        "rest lengths) and depower (their mean); 0 = none (the paper's Eq. 16-17)", "m/s", lo=0,
+        note="per controller period at most this times control_dt_s (kite_env.control.actuate), on each motor's axis "
+             "as the KCU moves the lines (van der Vlugt et al., \"Design and experimental characterization of a "
              "pumping kite power system\", in Airborne Wind Energy, Springer 2013, ch. 23; Fechner et al., Renewable "
-             "Energy 83, 705, 2015): half the difference (L_B - L_D)/2 and the mean (L_B + L_D)/2 each move at most "
-             "line_speed_max_mps; \"per_line\" = each rest length on its own (a saturated steering command then "
-             "leaves the force loop no speed at all, docs/environment.md, \"The KCU's two motors\")")
+             "Energy 83, 705, 2015): a saturated steering command leaves the force loop's common change its own "
+             "speed (docs/environment.md, \"The KCU's two motors\"). 2 m/s (the default with the wing with inertia: "
+             "a held full input otherwise moves the lines by metres in one controller period) is above all the "
+             "baseline asks after its first 0.1 s (1.45 m/s); a real KCU is slower (docs/model.md, \"Large steering "
+             "inputs\")")
 
 
 @dataclass(frozen=True)
@@ -583,6 +551,52 @@ RANDOMISED = {
 }
 
 
+#: keys that only chose a former default, retired with it ("one key per quantity"): each ``section.key`` and the single
+#: value every model now has. Those of :data:`MODEL_SECTIONS` stay in a model's record (:func:`fingerprint`), so that
+#: an artefact made before they were retired keeps its fingerprint and one made at another value is refused
+#: (:func:`check_model`); a configuration that still gives one is refused (:func:`config_from_dict`).
+RETIRED: dict[str, Any] = {
+    "structure.tube_curvature": "element_energy",
+    "structure.te_hem_element": "rod",
+    "structure.added_mass_force": "normal_velocity_rate",
+    "fsi.extrapolate": True,
+    "control.actuator_axes": "steer_depower",
+}
+
+#: what every model now does in place of each retired key (the message that refuses it)
+RETIRED_NOW: dict[str, str] = {
+    "structure.tube_curvature": "a tube element's Breukels law is taken at the element's root-mean-square curvature, "
+                                "the gradient of a stored energy with an exact tangent (docs/model.md, \"The "
+                                "conservative tube law\")",
+    "structure.te_hem_element": "the trailing-edge hem is made of frame-free rods (docs/model.md, \"The "
+                                "trailing-edge hem\")",
+    "structure.added_mass_force": "the added mass exerts Theodorsen's non-circulatory force, M_a a plus the "
+                                  "normal-rate part at the 3/4-chord point (docs/model.md, \"Theodorsen's force\")",
+    "fsi.extrapolate": "a warm time step starts from the linear extrapolation of the last two steps",
+    "control.actuator_axes": "control.line_speed_max_mps limits the KCU's steering and depower motors "
+                             "(docs/environment.md, \"The KCU's two motors\")",
+}
+
+
+def _retired_model_keys() -> dict[str, Any]:
+    """The retired keys of :data:`MODEL_SECTIONS` with their one value (:data:`RETIRED`)."""
+    return {k: v for k, v in RETIRED.items() if k.split(".")[0] in MODEL_SECTIONS}
+
+
+def without_retired(data: dict[str, Any]) -> dict[str, Any]:
+    """A complete configuration recorded before keys were retired (``{section: {key: value}}``, e.g. a kite-train
+    run's ``config.yml``) without its retired keys where they hold their one value (:data:`RETIRED`), ready for
+    :func:`config_from_dict`; a retired key at another value is left in, so that the configuration is refused
+    naming it (that model no longer exists)."""
+    out = {s: dict(v) if isinstance(v, dict) else v for s, v in data.items()}
+    for name, value in RETIRED.items():
+        s, k = name.split(".")
+        sec = out.get(s)
+        if isinstance(sec, dict) and k in sec and sec[k] == value:
+            del sec[k]
+    return out
+
+
 def _pins(data: dict) -> dict:
     """The range keys that the layer ``data`` pins (:data:`RANDOMISED`)."""
     given = {f"{s}.{k}" for s, v in data.items() if isinstance(v, dict) for k in v}
@@ -631,6 +645,10 @@ def config_from_dict(data: dict[str, Any] | None, base: Config | None = None) ->
         valid = {f.name: f for f in fields(sec)}
         updates = {}
         for key, value in values.items():
+            if f"{sec_name}.{key}" in RETIRED:
+                name, now = f"{sec_name}.{key}", RETIRED[f"{sec_name}.{key}"]
+                raise ConfigError(f"config key '{name}' is retired, always {str(now).lower()} now: "
+                                  f"{RETIRED_NOW[name]}; remove it from the configuration")
             if key not in valid:
                 raise ConfigError(f"unknown config key '{sec_name}.{key}' (valid: {', '.join(valid)})")
             updates[key] = _coerce(f"{sec_name}.{key}", value, getattr(sec, key),
@@ -768,22 +786,24 @@ def preset_name(cfg: Config) -> str:
 
 def fingerprint(cfg: Config) -> dict[str, Any]:
     """The model ``cfg`` flies: ``{"preset", "fingerprint", "keys"}``, the fingerprint the first 16 hex digits of the
-    SHA-256 of the model keys (:func:`model_keys`) as sorted JSON. Stored with every artefact made from a model."""
+    SHA-256 of the model keys (:func:`model_keys`, with the retired ones at their one value, :data:`RETIRED`) as
+    sorted JSON. Stored with every artefact made from a model."""
     import hashlib
     import json
 
-    keys = model_keys(cfg)
+    keys = model_keys(cfg) | _retired_model_keys()
     digest = hashlib.sha256(json.dumps(keys, sort_keys=True, default=repr).encode()).hexdigest()[:16]
     return {"preset": preset_name(cfg), "fingerprint": digest, "keys": keys}
 
 
 def check_model(record: dict | None, cfg: Config, what: str) -> None:
     """Raise :class:`ModelMismatch` naming the keys that differ when ``record`` (a :func:`fingerprint` stored with
-    ``what``) is not the model of ``cfg``; a record without one is refused too (made before models were recorded)."""
+    ``what``) is not the model of ``cfg``; a record without one is refused too (made before models were recorded).
+    A retired key (:data:`RETIRED`) is compared with its one value: a record made at another value is refused."""
     if not record or "keys" not in record:
         raise ModelMismatch(f"{what} records no model (made before models were recorded); make it again for this "
                             f"model")
-    now = model_keys(cfg)
+    now = model_keys(cfg) | _retired_model_keys()
     old = record["keys"]
     diff = sorted(k for k in set(now) | set(old) if now.get(k, "<absent>") != old.get(k, "<absent>"))
     if diff:

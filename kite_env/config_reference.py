@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from kite_env.config import MODEL_SECTIONS, PRESETS, Config, allowed_values
+from kite_env.config import MODEL_SECTIONS, PRESETS, RETIRED, RETIRED_NOW, Config, allowed_values
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the generated files, relative to the repository root
@@ -234,6 +234,14 @@ def render_markdown() -> str:
             out += ["", "Notes:", ""]
             out += [f"- `{name}.{k.name}`: {k.note}" for k in notes]
         out.append("")
+    out += ["## Retired keys", "",
+            "Keys that only chose a former default are retired with it: a configuration that gives one is refused "
+            "(`ConfigError`). Each has one value now (`kite_env.config.RETIRED`); those of the model's sections "
+            "stay in a model's record at that value, so an artefact made before keeps its fingerprint and one made "
+            "at another value is refused.", "",
+            "| key | always | what every model does |", "|---|---|---|"]
+    out += [f"| `{k}` | `{yaml_value(v)}` | {_cell(RETIRED_NOW[k])} |" for k, v in RETIRED.items()]
+    out.append("")
     return "\n".join(out)
 
 

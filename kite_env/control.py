@@ -106,26 +106,14 @@ class LineActuator:
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
 
 
-def rate_limit(L, L_prev, cfg: ControlConfig):
-    """The rest length ``L`` the actuator reaches in one controller period from ``L_prev`` at its speed limit
-    ``control.line_speed_max_mps`` (0: no limit, the paper's Eq. 16-17 set the rest lengths directly); floats and
-    arrays."""
-    if cfg.line_speed_max_mps <= 0.0:
-        return L
-    step = cfg.line_speed_max_mps * cfg.control_dt_s
-    return np.clip(L, np.asarray(L_prev) - step, np.asarray(L_prev) + step)
-
-
 def actuate(L_B, L_D, L_B_prev, L_D_prev, cfg: ControlConfig):
     """The rest lengths ``(L_B, L_D)`` the KCU reaches in one controller period from ``(L_B_prev, L_D_prev)``
-    (floats or arrays). With ``control.actuator_axes = "steer_depower"`` the KCU's steering motor moves half the
-    difference ``(L_B - L_D) / 2`` and its depower motor the mean ``(L_B + L_D) / 2``, each at most at
-    ``control.line_speed_max_mps``, so a saturated steering command leaves the force loop's common change its own
-    speed; ``"per_line"`` limits each rest length on its own (:func:`rate_limit`). No limit: as commanded."""
+    (floats or arrays): its steering motor moves half the difference ``(L_B - L_D) / 2`` and its depower motor the
+    mean ``(L_B + L_D) / 2``, each at most at ``control.line_speed_max_mps``, so a saturated steering command leaves
+    the force loop's common change its own speed. No limit (0, the paper's Eq. 16-17 set the rest lengths
+    directly): as commanded."""
     if cfg.line_speed_max_mps <= 0.0:
         return L_B, L_D
-    if cfg.actuator_axes == "per_line":
-        return rate_limit(L_B, L_B_prev, cfg), rate_limit(L_D, L_D_prev, cfg)
     step = cfg.line_speed_max_mps * cfg.control_dt_s
     c_prev, d_prev = 0.5 * (np.asarray(L_B_prev) + L_D_prev), 0.5 * (np.asarray(L_B_prev) - L_D_prev)
     c = np.clip(0.5 * (np.asarray(L_B) + L_D), c_prev - step, c_prev + step)

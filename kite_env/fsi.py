@@ -162,11 +162,11 @@ class AeroelasticWing:
         EI2[te] = np.maximum(EI2[te], s.te_hem_EI_Nm2)
         EI3[te] = np.maximum(EI3[te], s.te_hem_EI_Nm2)
         GJ[te] = np.maximum(GJ[te], s.te_hem_EI_Nm2 / (1.0 + _NU_ROD))
-        # structure.te_hem_element: "rod" takes the hem out of the co-rotational beams (their rows stay, without
-        # stiffness, so that the beams keep the mesh's numbering) into frame-free rods with its axial, bending and
-        # torsional stiffness (kite_env.structure.hem; docs/model.md, "The trailing-edge hem")
+        # the hem is taken out of the co-rotational beams (their rows stay, without stiffness, so that the beams keep
+        # the mesh's numbering) into frame-free rods with its axial, bending and torsional stiffness
+        # (kite_env.structure.hem; docs/model.md, "The trailing-edge hem")
         self.hem = None
-        if s.te_hem_element == "rod" and np.any(te):
+        if np.any(te):
             self.hem = HemSet(mesh.beams[te], mesh.nodes, np.asarray(mesh.beam_up)[te], EA[te],
                               0.5 * (EI2[te] + EI3[te]), GJ[te])
             EA[te] = EI2[te] = EI3[te] = GJ[te] = 0.0
@@ -211,7 +211,7 @@ class AeroelasticWing:
         self._sec_prev: np.ndarray | None = None  # section node positions at the previous time step (Eq. 3)
         self._cm_ref: float | None = None  # C_M reference point during a cold start's continuation
         # a cold start of the conservative tube law: the ramp with the larger-end law, the last solve with the exact
-        # tangent of the configured one (solve)
+        # tangent of the conservative one (solve)
         self._tube_law: str | None = None
         self._exact_tube_tangent = False
         self._C_damp: np.ndarray | None = None  # (n_sec, 3, 3) section damping of the current time step [N s/m]
@@ -247,7 +247,7 @@ class AeroelasticWing:
 
     def _predict(self, dt: float | None) -> NodalState:
         """Start of a warm time step: the last solution, linearly extrapolated in time when the two previous
-        committed solves were time steps (``fsi.extrapolate``): positions ``x + r (x - x_prev)``, rotations
+        committed solves were time steps: positions ``x + r (x - x_prev)``, rotations
         ``expm(r log(R R_prev^T)) R`` with ``r = dt / dt_prev`` (at most 2; for equal steps simply
         ``R R_prev^T R``, re-orthonormalised). Without the rotations a warm step needs about 3 Newton iterations
         instead of 1.3. Only the start of Newton changes."""
@@ -298,10 +298,10 @@ class AeroelasticWing:
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
         l, th = self.beams.local_rotations(state.x[self.mesh.beams], state.Rn[self.mesh.beams])
-        measure = self.cfg.structure.tube_curvature if self._tube_law is None else self._tube_law
+        measure = "element_energy" if self._tube_law is None else self._tube_law
         p = self._tube_props_fold if measure == "element_energy" else self.tube_props
-        # the energy's curvature is per unloaded length; the larger-end law keeps its current chord length (stops
-        # before 27: the default flight unchanged)
+        # the energy's curvature is per unloaded length; the larger-end law of a cold solve's continuation takes the
+        # current chord length (as it always has: the cold starts unchanged)
         L_k = self.beams.L0 if measure == "element_energy" else l
         if self.beams.backend == "numba":  # the same formulas in one compiled loop (tested against the lines below)
             n_t = self._tube_rows.size
@@ -325,11 +325,7 @@ class AeroelasticWing:
     def strain_energy(self, state: NodalState) -> float:
         """Stored elastic energy [J] of the wing at ``state``: the canopy shells, the tip rods and trailing-edge
         wire, and the inflated tubes with Breukels' law as the energy ``L0 (W(kappa) + W_t(phi))`` of
-        :mod:`kite_env.structure.tube` (``structure.tube_curvature = "element_energy"``; the ``max_end`` law has no
-        stored energy, ValueError)."""
-        if self.cfg.structure.tube_curvature != "element_energy":
-            raise ValueError("strain_energy: the tube law with structure.tube_curvature='max_end' is not derived "
-                             "from an energy")
+        :mod:`kite_env.structure.tube` (the conservative tube law, at each element's rms curvature)."""
         b, m, tb = self.beams, self.mesh, self._is_tube
         xb, Rb = state.x[m.beams], state.Rn[m.beams]
         l, th = b.local_rotations(xb, Rb)
@@ -511,7 +507,7 @@ class AeroelasticWing:
         if not warm:
             self._downwash = None
         flight = self._downwashed(flight)
-        predicted = warm and self.state is not None and self.cfg.fsi.extrapolate and self._step_prev is not None
+        predicted = warm and self.state is not None and self._step_prev is not None
         if warm and self.state is not None:
             state = self._predict(dt) if predicted else self.state.copy()
             ramp = [1.0]
@@ -600,8 +596,7 @@ class AeroelasticWing:
         # last solve from that equilibrium with the exact tangent of the conservative law. On the secant alone its
         # C_M continuation stagnated (a few N above the tolerance) and the cold start of tests/dynamics/test_flight.py
         # failed (docs/model.md, "Energy", "The conservative tube law"). Only the path changes.
-        law_continuation = cold and self.cfg.structure.tube_curvature == "element_energy"
-        if law_continuation:
+        if cold:
             self._tube_law = "max_end"
         try:
             try:
@@ -613,7 +608,7 @@ class AeroelasticWing:
                 self._cm_ref = None
                 self._tube_law = None
             start = state
-            self._exact_tube_tangent = law_continuation
+            self._exact_tube_tangent = cold
             try:
                 return self._attempts(start, q_start, q_b, n_sub, predicted, flight, dt, support, ramp[-1], part,
                                       step, method)
@@ -863,7 +858,7 @@ class _AeroLoad:
         self.n_tangent = 0
 
     def force(self, state: NodalState) -> np.ndarray:
-        # the tubes' exact tangent (structure.tube_curvature = element_energy) in time steps (warm starts, small
+        # the tubes' exact tangent (the conservative law, element_energy) in time steps (warm starts, small
         # increments: quadratic convergence, 1.79 instead of 1.97 Newton iterations per step over the quasi-static
         # baseline); a cold static solve keeps the secant stiffness alone, Kachanov's secant iteration, which
         # converges from far for a monotone law (Kachanov, J. Appl. Math. Mech. 23, 880, 1959; Fucik, Kratochvil &

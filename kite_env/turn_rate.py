@@ -167,7 +167,7 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     for g, code in zip(STIFFNESS_PARTS[:4], (BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP)):
         sel = m.beam_kind == code
         np.add.at(groups[g], (dof_b[sel][:, :, None], dof_b[sel][:, None, :]), Kb[sel])
-    if wing.hem is not None:  # (the hem as frame-free rods: structure.te_hem_element = "rod")
+    if wing.hem is not None:  # (the hem as frame-free rods)
         _, Kh = wing.hem.internal(st.x[wing.hem.conn], st.Rn[wing.hem.conn])
         dof_h = element_dofs(wing.hem.conn)
         np.add.at(groups[STIFFNESS_PARTS[2]], (dof_h[:, :, None], dof_h[:, None, :]), Kh)
@@ -395,8 +395,8 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     at the held inflow, the bridle lines). ``M``: the nodal mass blocks with the added mass. ``D = -df/dv`` by
     central differences (``h_mps``) of the step's own force law (:class:`_StepLoad`, built at each velocity state):
     the section loads see the wing's rigid translation through the inflow (``u_ref``, their force and moment alike),
-    the deviation from it through the section damping, plus the bridle lines' and the structural damping and, with
-    ``structure.added_mass_force = "normal_velocity_rate"``, the normal-rate force with ``n' = (dn/dx) v``.
+    the deviation from it through the section damping, plus the bridle lines' and the structural damping and
+    Theodorsen's normal-rate force with ``n' = (dn/dx) v``.
     ``rigid_inflow=False`` gives the operators' damping ``C`` instead (the Newton tangent's, which applies the
     section damping to all of the velocity: the rigid translation's response is then the sections' forces at their
     3/4-chord points, symmetric part projected onto the positive semi-definite cone, without the moment of Eq. 9)."""
@@ -440,8 +440,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     nodes, comp = t // 6, t % 6
     if rigid_inflow:
         D = np.zeros((t.size, t.size))
-        normal_rate = (wing.cfg.structure.added_mass_force == "normal_velocity_rate"
-                       and dyn.section_added_mass is not None)
+        normal_rate = dyn.section_added_mass is not None
         n0 = dyn._section_frames(st.x).e_z if normal_rate else None
         eps = 1e-6  # [s] the normal's rate (dn/dx) v by a forward difference of the shape
 

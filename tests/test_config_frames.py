@@ -166,14 +166,18 @@ def test_presets_are_recognised_and_paper_yaml_is_the_paper_preset():
 def test_fingerprint_covers_the_model_sections_only():
     import json
 
-    from kite_env.config import MODEL_SECTIONS, fingerprint, model_keys
+    from kite_env.config import MODEL_SECTIONS, RETIRED, fingerprint, model_keys
 
     cfg = Config()
     fp = fingerprint(cfg)
     assert set(fp) == {"preset", "fingerprint", "keys"} and fp["preset"] == "default"
     assert len(fp["fingerprint"]) == 16 and int(fp["fingerprint"], 16) >= 0
     d = cfg.to_dict()
-    assert fp["keys"] == model_keys(cfg) == {f"{s}.{k}": v for s in MODEL_SECTIONS for k, v in d[s].items()}
+    assert model_keys(cfg) == {f"{s}.{k}": v for s in MODEL_SECTIONS for k, v in d[s].items()}
+    # the retired keys of the model's sections stay in the record at their one value (fsi is not the model)
+    retired = {k: v for k, v in RETIRED.items() if k.split(".")[0] in MODEL_SECTIONS}
+    assert retired and "fsi.extrapolate" in RETIRED and "fsi.extrapolate" not in fp["keys"]
+    assert fp["keys"] == model_keys(cfg) | retired
     assert set(MODEL_SECTIONS) == {"kite", "structure", "aero", "dynamics", "control"}
     same = load_config(None, ["wind.speed_mps=8", "env.max_episode_s=5", "sim.fidelity=surrogate",
                               "fsi.max_newton_iter=40", "trajectory.elevation_deg=30"])
@@ -214,6 +218,70 @@ def test_check_model_names_the_keys_that_differ():
     for record in (None, {}, {"preset": "default", "fingerprint": fingerprint(cfg)["fingerprint"]}):
         with pytest.raises(ModelMismatch, match="agent records no model"):
             check_model(record, cfg, "agent")
+
+
+def test_a_record_made_at_another_value_of_a_retired_key_is_refused():
+    """A retired key (kite_env.config.RETIRED) stays in a model's record at its one value: a record made before it
+    was retired, at that value, is this model (the shipped agent's and reduced-order wing's records, the
+    fingerprint unchanged); one made at another value (the larger-end tube law) is refused, naming the key."""
+    import json
+
+    from kite_env.config import ModelMismatch, check_model, fingerprint
+    from kite_env.surrogate import default_surrogate_path
+    from kite_env.surrogate.model import SurrogateWing
+
+    cfg = Config()
+    agent = json.loads((ROOT / "agents" / "models" / "ppo" / "model.json").read_text())
+    wing = SurrogateWing.load(default_surrogate_path(cfg.kite.name)).meta["model"]
+    for record in (agent, wing):
+        assert record["keys"]["structure.tube_curvature"] == "element_energy"  # made with the retired key
+        assert record["fingerprint"] == fingerprint(cfg)["fingerprint"]
+        check_model(record, cfg, "shipped artefact")
+    rec = fingerprint(cfg)
+    rec["keys"] = rec["keys"] | {"structure.tube_curvature": "max_end"}
+    with pytest.raises(ModelMismatch, match=r"1 key\(s\) differ: structure\.tube_curvature \('max_end' there, "
+                                            r"'element_energy' here\)"):
+        check_model(rec, cfg, "agent")
+
+
+@pytest.mark.parametrize("key", ["structure.tube_curvature", "structure.te_hem_element",
+                                 "structure.added_mass_force", "fsi.extrapolate", "control.actuator_axes"])
+def test_a_retired_key_is_refused_with_what_every_model_now_does(key, tmp_path):
+    """A configuration that gives a retired key, even at the value every model now has, is refused with one
+    message: the key is retired, its one value, what the model does; the same from a file and from --set."""
+    from kite_env.config import RETIRED, RETIRED_NOW
+
+    value = RETIRED[key]
+    section, name = key.split(".")
+    path = tmp_path / "old.yaml"
+    path.write_text(yaml.safe_dump({section: {name: value}}))
+    for kwargs in ({"path": path}, {"overrides": [f"{key}={str(value).lower()}"]}):
+        with pytest.raises(ConfigError) as err:
+            load_config(**kwargs)
+        msg = str(err.value)
+        assert msg.startswith(f"config key '{key}' is retired, always {str(value).lower()} now: ")
+        assert RETIRED_NOW[key] in msg and msg.endswith("remove it from the configuration")
+        assert "\n" not in msg
+    with pytest.raises(ConfigError, match=f"config key '{key}' is retired"):
+        config_from_dict({section: {name: "anything"}})
+
+
+def test_a_config_recorded_before_the_keys_were_retired_loads_without_them():
+    """kite_env.config.without_retired: a complete configuration written before keys were retired (a kite-train
+    run's config.yml, agents/models/ppo/config.yml) loads once its retired keys at their one value are dropped; one
+    recorded at another value is still refused, naming the key."""
+    from kite_env.config import without_retired
+
+    data = yaml.safe_load((ROOT / "agents" / "models" / "ppo" / "config.yml").read_text())
+    assert data["structure"]["tube_curvature"] == "element_energy" and data["fsi"]["extrapolate"] is True
+    with pytest.raises(ConfigError, match="is retired"):
+        config_from_dict(data)
+    cfg = config_from_dict(without_retired(data))
+    assert cfg.structure == Config().structure and cfg.control == Config().control
+    assert data["structure"]["tube_curvature"] == "element_energy"  # (the record itself left as it is)
+    data["control"]["actuator_axes"] = "per_line"
+    with pytest.raises(ConfigError, match="config key 'control.actuator_axes' is retired"):
+        config_from_dict(without_retired(data))
 
 
 
@@ -391,8 +459,8 @@ def test_the_checks_read_from_the_declarations():
     """A choice, a range, a check and .inf where allowed: the messages name the key and what it takes."""
     with pytest.raises(ConfigError, match=r"'aero.negative_alpha' must be 'bounded' or 'breukels', got 'x'"):
         load_config(None, ["aero.negative_alpha=x"])
-    with pytest.raises(ConfigError, match=r"'structure.carry_residual' must be 'sections', 'full' or 'none'"):
-        load_config(None, ["structure.carry_residual=some"])
+    with pytest.raises(ConfigError, match=r"'structure.carry_residual' must be 'sections' or 'full', got 'none'"):
+        load_config(None, ["structure.carry_residual=none"])
     with pytest.raises(ConfigError, match=r"'aero.moment_chord_power' must be 1 or 2, got 1.5"):
         load_config(None, ["aero.moment_chord_power=1.5"])
     with pytest.raises(ConfigError, match=r"'structure.canopy_nu' must lie in \(-1, 0.5\), got 0.5"):

@@ -197,7 +197,7 @@ def test_a_cold_start_halves_a_load_increment_that_is_too_far():
 
 
 def test_a_cold_solve_of_the_conservative_tube_law_ends_on_that_law():
-    """A cold solve with ``structure.tube_curvature = element_energy`` (the default) follows its load ramp and C_M
+    """A cold solve of the conservative tube law (element_energy) follows its load ramp and C_M
     continuation with the larger-end law and makes its last solve with the conservative law's exact tangent
     (``AeroelasticWing.solve``): the equilibrium it returns is that of the conservative law (every tube at its
     secant of the element's rms curvature; force balance), not of the law of the path."""
@@ -206,7 +206,6 @@ def test_a_cold_solve_of_the_conservative_tube_law_ends_on_that_law():
     wing = AeroelasticWing(build_kite("rhino16"), Config())
     sol = wing.solve(None, FlightState.wind_tunnel(AIRSPEED, ALPHA_K), support="lines", warm=False)
     state = wing.state
-    assert wing.cfg.structure.tube_curvature == "element_energy"
     assert abs(sol.F_b.sum(axis=0)[2]) > 1000.0
     assert wing._tube_law is None and not wing._exact_tube_tangent  # nothing of the path is left
     tb = wing._is_tube
@@ -285,22 +284,16 @@ def test_induced_drag_turns_the_lift_back_by_the_lifting_line_angle():
 
 
 def test_tube_tangent_is_exact_in_time_steps_and_the_secant_in_cold_solves(nominal):
-    """The tubes' material tangent terms (structure.tube_curvature = element_energy) enter the Newton matrix of a
-    time step (warm, small increments); a cold static solve iterates on the secant stiffness alone (Kachanov's
-    secant iteration: a randomized 9 m/s start failed with the exact tangent of saturating tubes)."""
+    """The tubes' material tangent terms (the conservative law's) enter the Newton matrix of a time step (warm, small
+    increments); a cold static solve iterates on the secant stiffness alone (Kachanov's secant iteration: a
+    randomized 9 m/s start failed with the exact tangent of saturating tubes)."""
     from kite_env.fsi import _AeroLoad
 
     _, flight, _, state = nominal
-    base = Config()
-    for measure in ("element_energy", "max_end"):
-        wing = AeroelasticWing(build_kite("rhino16"), dataclasses.replace(
-            base, structure=dataclasses.replace(base.structure, tube_curvature=measure)))
-        tb = wing._tube_rows
-        asm = wing._mono_solvers["prescribed"].asm
-        _AeroLoad(wing, asm, flight, None, 1.0).force(state)
-        assert np.all(wing.beams._kmat[tb] == 0.0)
-        _AeroLoad(wing, asm, flight, 0.005, 1.0).force(state)
-        if measure == "element_energy":
-            assert np.all(wing.beams._kmat[tb, 0] < 0.0)  # a loaded tube softens: g_b < 0 on every element
-        else:  # the larger-end law has no consistent tangent
-            assert np.all(wing.beams._kmat[tb] == 0.0)
+    wing = AeroelasticWing(build_kite("rhino16"), Config())
+    tb = wing._tube_rows
+    asm = wing._mono_solvers["prescribed"].asm
+    _AeroLoad(wing, asm, flight, None, 1.0).force(state)
+    assert np.all(wing.beams._kmat[tb] == 0.0)
+    _AeroLoad(wing, asm, flight, 0.005, 1.0).force(state)
+    assert np.all(wing.beams._kmat[tb, 0] < 0.0)  # a loaded tube softens: g_b < 0 on every element

@@ -22,7 +22,7 @@ Cost, measured on the shared 2-core development container (best of repeats, pert
 (a few seconds); later processes load the cache from ``__pycache__``.
 
 :func:`section_normal_rate_forces` computes Theodorsen's normal-rate load of the wing with inertia
-(``WingDynamics.normal_rate_force``, ``structure.added_mass_force = "normal_velocity_rate"``) from the same section
+(``WingDynamics.normal_rate_force``) from the same section
 frames (:func:`_section_axes`, shared with the loads' kernel) in one loop: the force costs about 12 us per call
 (with the sections gathered from the nodes and scattered back) where the NumPy path (the full loads kernel for the
 frames, the 3/4-chord weights, the force) took about 64 us at every Newton iterate, 9 % of the baseline flight's

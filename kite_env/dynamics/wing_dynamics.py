@@ -21,9 +21,8 @@ the wing has mass and moves:
   the low-aspect-ratio factor ``k_C = AR / (1 + AR)`` of Lissaman & Brown's parafoil model ("Apparent mass effects
   on parafoil dynamics", AIAA-93-1236, 1993), scaled by ``structure.added_mass_factor`` (0: none). Each section's
   added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length. Its
-  force is ``M_a a`` plus, by default (``structure.added_mass_force = "normal_velocity_rate"``), the
-  part of Theodorsen's non-circulatory load that ``M_a a`` misses (:meth:`WingDynamics.normal_rate_force`);
-  ``"nodal_acceleration"`` keeps ``M_a a`` alone.
+  force is ``M_a a`` plus the part of Theodorsen's non-circulatory load that ``M_a a`` misses
+  (:meth:`WingDynamics.normal_rate_force`).
 * **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
   inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
   damping of each section's deviation from it, rotation and deformation together, through the consistent section damping
@@ -616,8 +615,8 @@ class WingDynamics:
         self.M_blocks = M
 
     def normal_rate_force(self, held, x: np.ndarray, v: np.ndarray, v_wind: np.ndarray) -> np.ndarray:
-        """The part of Theodorsen's non-circulatory load that the mass blocks ``m_a n n^T`` miss
-        (``structure.added_mass_force = "normal_velocity_rate"``), at the iterate ``x``, ``v`` (n_nodes, 3) [N].
+        """The part of Theodorsen's non-circulatory load that the mass blocks ``m_a n n^T`` miss,
+        at the iterate ``x``, ``v`` (n_nodes, 3) [N].
 
         Theodorsen (1935, NACA Report 496) gives a plate's non-circulatory lift as ``pi rho b^2 (h'' + U alpha' -
         b a alpha'')``: the plunge and pitch accelerations act through the air's added mass at the plate's own
@@ -765,7 +764,7 @@ class WingDynamics:
 
         def step_load() -> _StepLoad:
             ld = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=pred)
-            if wing.cfg.structure.added_mass_force == "normal_velocity_rate" and self.section_added_mass is not None:
+            if self.section_added_mass is not None:
                 ld.normal_rate = (self._section_frames(self.state.x).e_z, self.section_added_mass, dt)
             return ld
 
@@ -809,16 +808,14 @@ class WingDynamics:
         elif self.rayleigh_held is not None:
             kd, kb, age, Q0 = self.rayleigh_held
             self.rayleigh_held = (kd, kb, age + dt, Q0)
-        if self.carry_residual != "none":
-            # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance;
-            # on the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the
-            # momentum that a step misses is delivered one step late and the misses do not add up over a flight.
-            # "sections": only what moves the sections as a whole (section_resultant_load; docs/performance.md, "The
-            # carried residual")
-            rho = -res.reactions
-            rho[self.solver.auto_fixed] = 0.0
-            rho[self.held_dofs] = 0.0
-            self.carry = (self.section_resultant_load(rho) if self.carry_residual == "sections" else rho, dt)
+        # the unbalanced force correction: the residual f_eff - f_int that Newton leaves (within its tolerance; on
+        # the free DOF, -reactions) goes into the next step's load with the same impulse (rho dt), so the momentum
+        # that a step misses is delivered one step late and the misses do not add up over a flight. "sections": only
+        # what moves the sections as a whole (section_resultant_load; docs/performance.md, "The carried residual")
+        rho = -res.reactions
+        rho[self.solver.auto_fixed] = 0.0
+        rho[self.held_dofs] = 0.0
+        self.carry = (self.section_resultant_load(rho) if self.carry_residual == "sections" else rho, dt)
         self.w, self.aw = w, aw
         wing.state = st
         T, _, e = load.line

@@ -410,8 +410,8 @@ class FEModel:
     @staticmethod
     def _tube_strains(bs: BeamSet, state: NodalState):
         """Curvature [1/m] and twist rate [rad/m] of tube elements for the secant law, each (n_e,): the larger end
-        curvature of the cubic element (:func:`kite_env.structure.tube.element_curvature`, the default of fsi.py's
-        ``structure.tube_curvature``)."""
+        curvature of the cubic element (:func:`kite_env.structure.tube.element_curvature`, the law of the cold solve's
+        continuation in fsi.py)."""
         loc = bs.local_deformation(state.x[bs.conn], state.Rn[bs.conn])
         th1, th2, L0 = loc["theta1"], loc["theta2"], loc["L0"]
         return tube.element_curvature(th1, th2, L0, "max_end"), np.abs(th2[:, 0] - th1[:, 0]) / L0

@@ -17,12 +17,12 @@ load-deflection law ``P(v) = D (1 - exp(-(N/D) v))`` therefore becomes::
     T(phi)   = c1 arctan(c2 phi)                        GJ0 = c1 c2    (phi = twist per metre)
 
 The beam element uses the *secant* stiffness ``EI = M(kappa) / kappa`` and ``GJ = T(phi) / phi`` of its current
-curvature and twist, updated at every iterate (the paper's "deflection-dependent cross-sectional properties"). Which
-curvature of the cubic element the law is evaluated at is ``structure.tube_curvature`` (:func:`element_curvature`):
-the element's root-mean-square curvature makes the secant law the gradient of the stored energy
-``L0 (W(kappa) + W_t(phi))`` (:func:`bending_energy_density`, :func:`torsion_energy_density`), so the tubes are
-elastic and their tangent (:func:`secant_material_terms`) is exact; the default, the larger end curvature, is not
-a gradient (docs/model.md, "Energy"). Collapse (local wrinkling through the tube) is flagged when the
+curvature and twist, updated at every iterate (the paper's "deflection-dependent cross-sectional properties"). The
+law is evaluated at the element's root-mean-square curvature (:func:`element_curvature`), which makes the secant law
+the gradient of the stored energy ``L0 (W(kappa) + W_t(phi))`` (:func:`bending_energy_density`,
+:func:`torsion_energy_density`), so the tubes are elastic and their tangent (:func:`secant_material_terms`) is
+exact; the larger end curvature, which a cold solve's continuation takes, is not a gradient (docs/model.md, "The
+conservative tube law"). Collapse (local wrinkling through the tube) is flagged when the
 equivalent cantilever deflection ``v = kappa L^2 / 3`` exceeds ``v_collapse``; the beam model cannot represent the
 post-collapse state. Beyond it the law is a hinge of constant moment ``M_max``, and nothing in it stops a fold: the
 fold contact of :func:`fold_contact` (``structure.tube_fold_onset_deg``) closes a kinked element's fold at pi, where
@@ -197,7 +197,8 @@ def secant_GJ(props: TubeProperties, phi: np.ndarray) -> np.ndarray:
     return props.GJ0 * ratio
 
 
-#: curvature measures of a tube element for the secant law (``structure.tube_curvature``)
+#: curvature measures of a tube element for the secant law: the conservative law's, and the larger end curvature that
+#: the continuation of a cold solve takes (kite_env.fsi.AeroelasticWing.solve) and FEModel's secant tubes
 CURVATURE_MEASURES = ("element_energy", "max_end")
 
 
@@ -213,9 +214,10 @@ def element_curvature(theta1: np.ndarray, theta2: np.ndarray, L0: np.ndarray, me
       the secant law ``M(kappa)/kappa`` times the linear element's moments: the tube forces are conservative
       (a hyperelastic law is the gradient of its stored energy: Holzapfel, Nonlinear Solid Mechanics, Wiley 2000,
       ch. 6).
-    * ``"max_end"``: the larger magnitude of the two end curvatures (the former default). It is not a
-      function of the element's energy, so ``EI(kappa) K theta`` is not a gradient: on a closed path of the
-      element's rotations its forces do net work (a free wing gained kinetic energy from nothing).
+    * ``"max_end"``: the larger magnitude of the two end curvatures (the path of a cold solve's continuation, whose
+      secant iteration converges from the unloaded wing). It is not a function of the element's energy, so
+      ``EI(kappa) K theta`` is not a gradient: on a closed path of the element's rotations its forces do net work (a
+      free wing flown with it gained kinetic energy from nothing).
     """
     t1, t2 = np.asarray(theta1, dtype=float)[:, 1:], np.asarray(theta2, dtype=float)[:, 1:]
     L0 = np.asarray(L0, dtype=float)

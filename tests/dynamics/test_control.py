@@ -99,8 +99,6 @@ def test_force_loop_holds_while_the_power_lines_are_unloaded():
 
 def test_actuator_speed_limit():
     """control.line_speed_max_mps bounds the rest-length change per controller period; 0 is Eq. 16-17 as printed."""
-    from kite_env.control import rate_limit
-
     lengths = np.array([25.1, 25.2, 25.1, 25.2])
     T = np.array([1000.0, 300.0, 1000.0, 300.0])
     free = LineActuator(ControlConfig(line_speed_max_mps=0.0), 25.2, 25.2)
@@ -112,34 +110,24 @@ def test_actuator_speed_limit():
         L_B, L_D, _ = act.rest_lengths(1.5, lengths, T)
         assert L_B - 25.2 == pytest.approx(k * 2.0 * cfg.control_dt_s)
         assert 25.2 - L_D == pytest.approx(k * 2.0 * cfg.control_dt_s)
-    # a change within the limit passes unchanged; arrays (batched env) are limited element-wise
-    assert rate_limit(25.21, 25.2, cfg) == 25.21
-    assert rate_limit(np.array([30.0, 25.2, 20.0]), np.full(3, 25.2), cfg) == pytest.approx([25.24, 25.2, 25.16])
 
 
 def test_kcu_steering_and_depower_motors_have_their_own_speed():
-    """control.actuator_axes = steer_depower (default): half the difference and the mean of the two rest lengths
-    each move at most line_speed_max_mps; a saturated steering command leaves the force loop's common change its
-    speed. per_line limits each rest length, so the same command leaves the common mode where it was."""
+    """The actuator is the KCU's two motors: half the difference and the mean of the two rest lengths each move at
+    most line_speed_max_mps; a saturated steering command leaves the force loop's common change its speed."""
     from kite_env.control import actuate
 
     step = 2.0 * 0.02
     lengths = np.array([25.1, 25.2, 25.1, 25.2])
     T = np.array([1000.0, 0.0, 1000.0, 0.0])  # both steering lines slack: mu = 0, the force loop shortens both
-    out = {}
-    for axes in ("steer_depower", "per_line"):
-        act = LineActuator(ControlConfig(line_speed_max_mps=2.0, actuator_axes=axes), 25.2, 25.2)
-        L_B, L_D, info = act.rest_lengths(1.5, lengths, T)  # dl* - dl = 1.5 m: K2 e = 4.5 m, far beyond the limit
-        assert info["L3"] < 0.0
-        out[axes] = (L_B, L_D)
-    L_B, L_D = out["steer_depower"]
+    act = LineActuator(ControlConfig(line_speed_max_mps=2.0), 25.2, 25.2)
+    L_B, L_D, info = act.rest_lengths(1.5, lengths, T)  # dl* - dl = 1.5 m: K2 e = 4.5 m, far beyond the limit
+    assert info["L3"] < 0.0
     assert 0.5 * (L_B - L_D) == pytest.approx(step) and 0.5 * (L_B + L_D) == pytest.approx(25.2 - step)
-    L_B, L_D = out["per_line"]
-    assert 0.5 * (L_B + L_D) == pytest.approx(25.2) and L_B - 25.2 == pytest.approx(step)
     # within both limits the command passes unchanged; arrays (the batched env) are limited element-wise
     cfg = ControlConfig(line_speed_max_mps=2.0)
     assert actuate(25.21, 25.19, 25.2, 25.2, cfg) == pytest.approx((25.21, 25.19))
     B, D = actuate(np.array([30.0, 25.2]), np.array([20.4, 25.18]), np.full(2, 25.2), np.full(2, 25.2), cfg)
     assert B == pytest.approx([25.24, 25.2]) and D == pytest.approx([25.16, 25.18])
-    with pytest.raises(ConfigError, match="control.actuator_axes"):
-        config_from_dict({"control": {"actuator_axes": "diagonal"}})
+    with pytest.raises(ConfigError, match="config key 'control.actuator_axes' is retired"):
+        config_from_dict({"control": {"actuator_axes": "per_line"}})
