@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from kite_env.config import config_from_dict, load_config, parse_overrides
+from kite_env.config import ConfigError, config_from_dict, load_config, parse_overrides, without_retired
 from kite_env.envs import ENV_ID, FAST_ENV_ID
 
 ALGOS = ("ppo", "sac")
@@ -380,7 +380,10 @@ def select_checkpoint(run_dir: str | Path, episodes: int = 16, seed: int = SELEC
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.policies import load_model_agent, make_agent
 
-    cfg = load_config(cfg_path)
+    try:  # a run recorded before keys were retired flies on where they held the value every model has now
+        cfg = config_from_dict(without_retired(yaml.safe_load(cfg_path.read_text()) or {}))
+    except ConfigError as exc:
+        raise UsageError(f"'{cfg_path}': {exc}") from None
     # the run's environment as it trained: its randomised draws, its start rule, its episode length
     env_cfg = dataclasses.replace(cfg.env, randomize=True)
     if duration is not None:

@@ -415,6 +415,16 @@ def test_select_validates_every_checkpoint_and_ships_the_best(batched_runs, tmp_
     assert train_cli.main(["select", str(run), "--episodes", "0"]) == 2
     assert "at least 1" in capsys.readouterr().err
     assert again == json.loads((run / "selection.json").read_text())["rows"]
+    # a run recorded before a key was retired: flown on where it held the one value left, refused at another
+    recorded = yaml.safe_load((run / "config.yml").read_text())
+    for value, rc in (("element_energy", 0), ("max_end", 2)):
+        recorded["structure"]["tube_curvature"] = value
+        (run / "config.yml").write_text(yaml.safe_dump(recorded, sort_keys=False))
+        assert train_cli.main(["select", str(run), "--episodes", "2", "--duration", "0.2", "--every", "2"]) == rc
+        if rc == 0:
+            assert json.loads((run / "selection.json").read_text())["rows"] == again
+        else:
+            assert "structure.tube_curvature" in capsys.readouterr().err
 
 
 def test_batched_sac_with_held_out_evaluations(tmp_path):
