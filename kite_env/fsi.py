@@ -197,7 +197,7 @@ class AeroelasticWing:
                                   max_iter=self.cfg.fsi.max_newton_iter),
         }
         self.bridle = np.asarray(mesh.bridle)
-        # induced drag (aero.induced_drag, _downwashed): the unloaded wing's projected planform and span efficiency
+        # induced drag (aero.induced_drag, downwashed): the unloaded wing's projected planform and span efficiency
         span, self.planform_area_m2 = projected_planform(mesh.nodes[mesh.sections])
         self.aspect_ratio = span * span / self.planform_area_m2
         self.span_efficiency = oswald_efficiency(self.aspect_ratio)
@@ -243,7 +243,7 @@ class AeroelasticWing:
         for solver in (self.solver, self._lines_solver, *self._mono_solvers.values()):
             solver.forget_factorization()
         self.lines.tension[:] = 1.0
-        self._update_tube_stiffness(self.state)
+        self.update_tube_stiffness(self.state)
 
     def _predict(self, dt: float | None) -> NodalState:
         """Start of a warm time step: the last solution, linearly extrapolated in time when the two previous
@@ -281,6 +281,14 @@ class AeroelasticWing:
         """(4, 3) unloaded positions of A, B, C, D in frame K [m]."""
         return self.mesh.nodes[self.bridle].copy()
 
+    @property
+    def prescribed_assembly(self) -> Assembler:
+        """The :class:`~kite_env.structure.assembly.Assembler` of the wing's structure (beams, shells, hem) whose
+        sparsity pattern includes the section blocks of the aero load Jacobian: that of the monolithic solve with A-D
+        prescribed. For operators on the wing's DOF built outside its static solve (the wing with inertia's Newton
+        solve and operators, linearisations of the wing): their matrices share this pattern."""
+        return self._mono_solvers["prescribed"].asm
+
     def kcu_position(self) -> np.ndarray:
         """Design KCU position in K used by ``support="lines"``: on the symmetry plane below the tip mid-chord,
         at the power-line length (Table 1: L_A = L_C = 25 m) from A and C."""
@@ -290,10 +298,13 @@ class AeroelasticWing:
         return np.array([x, 0.0, a[2] - h])
 
     # ------------------------------------------------------------------ pieces of the coupling loop
-    def _update_tube_stiffness(self, state: NodalState, material_tangent: bool = True) -> np.ndarray:
+    def update_tube_stiffness(self, state: NodalState, material_tangent: bool = True) -> np.ndarray:
         """Secant EI(p, d, kappa) and GJ(p, d, phi) of the tubes from the current element deformation, with the
         material terms of the law's tangent when the law is evaluated at every iterate (``material_tangent``; False
         where the stiffness is held over a Newton solve, as in the partitioned coupling: the law is linear there).
+        Sets the tube rows of :attr:`beams` (what every later assembly of the wing's structure sees): called at each
+        iterate of the wing's own solves, of the wing with inertia (:mod:`kite_env.dynamics.wing_dynamics`) and before
+        a linearisation at ``state``.
 
         Returns the per-beam collapse flag (curvature beyond Breukels' collapse curvature)."""
         tb = self._is_tube
@@ -343,13 +354,15 @@ class AeroelasticWing:
     CM_CONTINUATION_START = 0.25
     CM_CONTINUATION_STEP = 0.05
 
-    def _continuation(self, state, start: float, target: float, h0: float, solve_at, history) -> NodalState:
+    def continuation(self, state, start: float, target: float, h0: float, solve_at, history) -> NodalState:
         """Continuation of a cold solve in one parameter from ``start`` to ``target`` in steps of at most ``h0``,
         each converged (``solve_at(state, value)`` returns the converged state at ``value``). A step whose solve fails
         is halved (down to ``h0 / 64``; then the failure is raised) and grows back after each converged one:
         automatic incrementation with cutback (Crisfield, *Non-linear Finite Element Analysis of Solids and
         Structures*, Vol. 1, Wiley 1991, ch. 9). A failed step leaves the last converged state and line tensions.
-        Only the path to the equilibrium changes."""
+        Only the path to the equilibrium changes. Used by the cold solve's load ramp and C_M continuation, and by a
+        simulator's start whose cold solve fails (a continuation in the kite's speed, ``solve_at`` a warm
+        :meth:`solve`); ``history`` collects the cutbacks."""
         sign = 1.0 if target >= start else -1.0
         current, h = start, h0
         while sign * (target - current) > 1e-12:
@@ -372,15 +385,15 @@ class AeroelasticWing:
 
     def _cold_ramp(self, state, q_b, flight, dt, support, last, h0, history, step):
         """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
-        of ``h0`` (``1 / fsi.cold_load_steps``) by :meth:`_continuation`. From the unloaded wing, whose canopy is
+        of ``h0`` (``1 / fsi.cold_load_steps``) by :meth:`continuation`. From the unloaded wing, whose canopy is
         slack and whose tangent is nearly singular, the fixed first sixth of the load was too far for Newton in 20 %
         of the randomized starts of ``scripts/end_reasons.py`` (docs/model.md, "The conservative tube law")."""
-        return self._continuation(state, 0.0, last, h0,
-                                  lambda st, scale: step(st, q_b, flight, dt, support, scale, history)[0], history)
+        return self.continuation(state, 0.0, last, h0,
+                                 lambda st, scale: step(st, q_b, flight, dt, support, scale, history)[0], history)
 
     def _cm_continuation(self, state, q_b, flight, dt, support, ramp, history, step, method):
         """A cold solve with Breukels' C_M taken about a point ahead of the quarter chord (``aero.
-        cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation (:meth:`_continuation`): the
+        cm_regression_ref_over_c`` < 0.25, e.g. the nose) is reached by continuation (:meth:`continuation`): the
         load ramp with the C_M about the quarter chord, then the point moved forward in steps of 0.05 c, each
         converged. From the unloaded wing directly it fails: there the mid sections sit at alpha of about 0.3 deg,
         where the centre of pressure of a nose-referenced C_M lies far ahead of the nose and pushes the aft canopy
@@ -394,11 +407,14 @@ class AeroelasticWing:
             return self._attempts(st, st.x[self.bridle].copy(), q_b, 1, False, flight, dt, support, ramp[-1],
                                   history, step, method)[0]
 
-        return self._continuation(state, self.CM_CONTINUATION_START, target, self.CM_CONTINUATION_STEP, solve_at,
-                                  history)
+        return self.continuation(state, self.CM_CONTINUATION_START, target, self.CM_CONTINUATION_STEP, solve_at,
+                                 history)
 
-    def _aero_options(self) -> dict:
-        """Keyword arguments of :func:`kite_env.aero.loads.section_loads` from ``cfg.aero``."""
+    def aero_options(self) -> dict:
+        """Keyword arguments of :func:`kite_env.aero.loads.section_loads` (and of ``section_damping`` and
+        ``load_jacobian``) from ``cfg.aero``: the options every evaluation of this wing's section loads takes, inside
+        its solves or outside them (the wing with inertia, linearisations), so that all see the same load model (during
+        a cold solve's C_M continuation, the continuation's reference point)."""
         a = self.cfg.aero
         return dict(moment_chord_power=a.moment_chord_power, luffing_cl=LUFFING_BAND_CL if a.canopy_luffing else 0.0,
                     cm_regression_ref_over_c=a.cm_regression_ref_over_c if self._cm_ref is None else self._cm_ref,
@@ -406,7 +422,7 @@ class AeroelasticWing:
                     negative_alpha=a.negative_alpha)
 
     # ------------------------------------------------------------------ induced drag (aero.induced_drag)
-    def _downwashed(self, flight: FlightState) -> FlightState:
+    def downwashed(self, flight: FlightState) -> FlightState:
         """The flight state with the wing's induced downwash added to the wind at every section: Prandtl's lifting
         line with an elliptic loading, a uniform induced velocity ``w = -alpha_i V e_L`` opposite to the wing's net
         lift, ``alpha_i = C_L / (pi e AR)`` (Anderson, *Fundamentals of Aerodynamics*, 5th ed., Sect. 5.3.1, Eq.
@@ -422,7 +438,7 @@ class AeroelasticWing:
         V = float(np.linalg.norm(flight.v_kite - flight.v_wind))
         return dataclasses.replace(flight, v_wind=flight.v_wind - alpha_i * V * e_L)
 
-    def _update_downwash(self, sol: WingSolution, flight: FlightState, dt: float | None = None) -> float:
+    def update_downwash(self, sol: WingSolution, flight: FlightState, dt: float | None = None) -> float:
         """Induced angle and lift direction from a solution at the free ``flight``; returns the change of the angle.
 
         In a time step (``dt``) the induced angle follows its quasi-steady value with a first-order lag of time
@@ -451,6 +467,20 @@ class AeroelasticWing:
         self._last_downwash_change = abs(alpha_i - old)
         return self._last_downwash_change
 
+    @property
+    def downwash(self) -> tuple[float, np.ndarray] | None:
+        """The held downwash ``(alpha_i [rad], e_L)`` (the induced angle and the net-lift direction in K) that
+        :meth:`downwashed` applies, or None (none yet, or induced drag off). Set by :meth:`update_downwash` and the
+        cold solve; turned with the wing's frame by :meth:`rotate_downwash`."""
+        return self._downwash
+
+    def rotate_downwash(self, Q: np.ndarray) -> None:
+        """Turn the held downwash's lift direction by the rotation ``Q`` (3, 3) (the induced angle kept): for a
+        simulator that moves the wing's frame K between steps, ``e_L <- Q e_L`` with ``Q`` taking the old frame's
+        components to the new one's. Nothing is held: nothing changes."""
+        if self._downwash is not None:
+            self._downwash = (self._downwash[0], Q @ self._downwash[1])
+
     def _eq3(self, dt: float | None) -> bool:
         """The paper's Eq. (3) as printed: the deformation velocity enters the section inflow."""
         return bool(dt) and self.cfg.aero.damping == "eq3"
@@ -466,7 +496,7 @@ class AeroelasticWing:
             x, self.mesh.section_tube_d, self.mesh.section_width, flight.v_kite, flight.omega, flight.v_wind,
             self.cfg.aero.rho_kg_m3, x_sec_prev=self._sec_prev if self._eq3(dt) else None,
             dt=dt if self._eq3(dt) else None,
-            **self._aero_options())
+            **self.aero_options())
         if dt and self._C_damp is not None:
             m = sec.shape[1]
             f_d = np.einsum("ikl,ijl->ijk", self._C_damp, x - self._sec_prev) * (-1.0 / (m * dt))
@@ -481,9 +511,12 @@ class AeroelasticWing:
         if dt and self.cfg.aero.damping == "consistent" and self._sec_prev is not None:
             self._C_damp = section_damping(
                 self._sec_prev, self.mesh.section_tube_d, self.mesh.section_width, flight.v_kite, flight.omega,
-                flight.v_wind, self.cfg.aero.rho_kg_m3, **self._aero_options())
+                flight.v_wind, self.cfg.aero.rho_kg_m3, **self.aero_options())
 
-    def _load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
+    def load_vector(self, loads, scale: float = 1.0) -> np.ndarray:
+        """The nodal load vector (n_dof,) of section loads ``loads`` (:class:`kite_env.aero.loads.SectionLoads`, its
+        ``nodal_forces`` on the section nodes) times ``scale``: the forces on the translational DOF of the section
+        nodes, zero elsewhere, in the DOF order of the wing's assemblers."""
         return np.bincount(self._load_dofs, weights=scale * loads.nodal_forces.ravel(), minlength=self.n_dof)
 
     # ------------------------------------------------------------------ main entry
@@ -506,7 +539,7 @@ class AeroelasticWing:
         free = flight
         if not warm:
             self._downwash = None
-        flight = self._downwashed(flight)
+        flight = self.downwashed(flight)
         predicted = warm and self.state is not None and self._step_prev is not None
         if warm and self.state is not None:
             state = self._predict(dt) if predicted else self.state.copy()
@@ -566,7 +599,7 @@ class AeroelasticWing:
         sol.history.append({"wall_s": time.perf_counter() - t0})
         if self.cfg.aero.induced_drag and commit:
             prev = 0.0 if self._downwash is None else self._downwash[0]
-            change = self._update_downwash(sol, free, dt if warm else None)
+            change = self.update_downwash(sol, free, dt if warm else None)
             # cold start: iterate the induced angle to a fixed point, in under-relaxed steps of at most 1 deg (a
             # sudden 5 deg turn of the inflow would be too large a step for the wing's Newton solve)
             for _ in range(40 if not warm else 0):
@@ -708,7 +741,7 @@ class AeroelasticWing:
         omega = fcfg.relax_initial
         for it in range(1, fcfg.max_coupling_iter + 1):
             loads = self._aero(state, flight, dt)
-            f_aero = self._load_vector(loads, scale)
+            f_aero = self.load_vector(loads, scale)
             # Aitken's dynamic under-relaxation of the aerodynamic load vector (Irons & Tuck 1969; Kuettler & Wall
             # 2008): the plain alternation of Fig. 2 diverges for this very flexible wing, whose section angles of
             # attack, and so its loads, follow the shape strongly. The fixed point (the equilibrium) is unchanged.
@@ -729,7 +762,7 @@ class AeroelasticWing:
                 self.lines.tension[:] = max(np.linalg.norm(f_ext.reshape(-1, 6)[:, :3].sum(axis=0)) / 4.0, 1.0)
             fnorm = np.linalg.norm(f_aero)
             dload = np.inf if f_prev is None else np.linalg.norm(f_aero - f_prev) / max(fnorm, 1e-12)
-            collapsed = self._update_tube_stiffness(state, material_tangent=False)
+            collapsed = self.update_tube_stiffness(state, material_tangent=False)
             try:
                 # inexact inner solve: a few Newton steps per load update (the loads are relaxed and updated
                 # anyway); the coupling only ends on an inner solve that converged to the Newton tolerance
@@ -766,7 +799,7 @@ class AeroelasticWing:
                 f"(tol_disp_m={fcfg.tol_disp_m}, tol_force_rel={fcfg.tol_force_rel})", history)
         # final aero loads on the converged shape and reactions F_b (second block of Eq. 1)
         loads = self._aero(state, flight, dt)
-        f_ext = self._load_vector(loads, scale)
+        f_ext = self.load_vector(loads, scale)
         return state, self._solution(state, loads, fi_b - f_ext.reshape(-1, 6)[b, :3], flight, scale, history,
                                      newton_total, collapsed)
 
@@ -793,6 +826,17 @@ class AeroelasticWing:
         d_rel = float(np.max(np.abs(T_new - self.lines.tension)) / max(np.max(T_new), 1e-9))
         self.lines.tension[:] = T_new
         return d_rel
+
+    def solution(self, state: NodalState, loads, F_b: np.ndarray, flight: FlightState, history: list[dict],
+                 newton_iters: int, collapsed: np.ndarray | None, accepted: bool = False) -> WingSolution:
+        """The :class:`WingSolution` of a shape solved outside :meth:`solve` (the wing with inertia,
+        :mod:`kite_env.dynamics.wing_dynamics`): ``state`` the shape, ``loads`` its section loads at full scale,
+        ``F_b`` (4, 3) the force on the wing at A-D, ``flight`` the free flight state (without the downwash) about
+        whose apparent wind lift and drag are taken (kept as the wing's free flight state, as :meth:`downwashed`
+        keeps it), ``history`` the solve's entries, ``newton_iters``, the tubes' ``collapsed`` flags and whether the
+        Newton solve ``accepted`` its best iterate."""
+        self._free_flight = flight
+        return self._solution(state, loads, F_b, flight, 1.0, history, newton_iters, collapsed, accepted)
 
     def _solution(self, state, loads, F_b, flight, scale, history, newton_iters, collapsed, accepted=False):
         """WingSolution of a converged shape; ``F_b = F_i^b - F_a^b`` (Eq. 1, second block)."""
@@ -865,11 +909,11 @@ class _AeroLoad:
         # Necas, Comment. Math. Univ. Carolinae 14, 651, 1973): with the exact, nearly singular tangent of saturating
         # tubes a randomized start at 9 m/s (seed 100 of scripts/end_reasons.py) failed that converges with the
         # secant
-        self.collapsed = self.wing._update_tube_stiffness(state, material_tangent=bool(self.dt)
-                                                          or self.wing._exact_tube_tangent)
+        self.collapsed = self.wing.update_tube_stiffness(state, material_tangent=bool(self.dt)
+                                                         or self.wing._exact_tube_tangent)
         self.loads = self.wing._aero(state, self.flight, self.dt)
         self.n_force += 1
-        self.f_ext = self.wing._load_vector(self.loads, self.scale)
+        self.f_ext = self.wing.load_vector(self.loads, self.scale)
         return self.f_ext
 
     def tangent(self, state: NodalState) -> np.ndarray:
@@ -878,7 +922,7 @@ class _AeroLoad:
         _, J = load_jacobian(
             state.x[w.mesh.sections], w.mesh.section_tube_d, w.mesh.section_width, fl.v_kite, fl.omega, fl.v_wind,
             w.cfg.aero.rho_kg_m3, x_sec_prev=w._sec_prev if eq3 else None, dt=self.dt if eq3 else None,
-            **w._aero_options())
+            **w.aero_options())
         if self.dt and w._C_damp is not None:
             # nodal damping forces -(C_i / m) (x_ij - x_ij,prev) / dt: a block -C_i / (m dt) on each node's diagonal
             n_sec, m = w.mesh.sections.shape

@@ -159,7 +159,7 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     from kite_env.structure.assembly import element_dofs
 
     st, m = wing.state, wing.mesh
-    wing._update_tube_stiffness(st, material_tangent=True)
+    wing.update_tube_stiffness(st, material_tangent=True)
     n_dof = 6 * m.n_nodes
     groups = {g: np.zeros((n_dof, n_dof)) for g in STIFFNESS_PARTS}
     _, Kb = wing.beams.internal(st.x[m.beams], st.Rn[m.beams])
@@ -174,9 +174,9 @@ def steering_point_stiffness(wing, flight, kcu_K: np.ndarray, k_line_N_per_m: fl
     _, Ks = wing.shells.internal(st.x[m.shells], st.Rn[m.shells])
     dof_s = element_dofs(m.shells)
     np.add.at(groups["canopy"], (dof_s[:, :, None], dof_s[:, None, :]), Ks)
-    fl = wing._downwashed(flight)
+    fl = wing.downwashed(flight)
     _, J = load_jacobian(st.x[m.sections], m.section_tube_d, m.section_width, fl.v_kite, fl.omega, fl.v_wind,
-                         wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                         wing.cfg.aero.rho_kg_m3, **wing.aero_options())
     for i, sec in enumerate(m.sections):
         d = (6 * sec[:, None] + np.arange(3)[None, :]).ravel()
         groups["aero"][np.ix_(d, d)] -= J[i]
@@ -407,7 +407,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     n = len(dyn.state.x)
     st = dyn.state
     dt = wing.cfg.dynamics.dt_s
-    asm = wing._mono_solvers["prescribed"].asm
+    asm = wing.prescribed_assembly
     zero3 = np.zeros(3)
     dyn.v = np.zeros((n, 3))
     dyn.a = np.zeros((n, 3))
@@ -426,7 +426,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     ld0.force(st)
     dyn.rayleigh_held = (ld0.K0, ld0.Kb_at, 0.0, np.eye(3))  # the structure's tangent at rest, for every state below
     K, C, M = ld0.operators(st)
-    wing._update_tube_stiffness(st)
+    wing.update_tube_stiffness(st)
     _, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
     Kfull = asm.matrix(kd + K).toarray()
     Mfull = asm.matrix(M).toarray()

@@ -247,7 +247,7 @@ def test_compiled_tube_secants_equal_the_numpy_formulas(nominal):
             out = {}
             for backend in ("numba", "numpy"):
                 beams.backend = backend
-                collapsed = wing._update_tube_stiffness(state)
+                collapsed = wing.update_tube_stiffness(state)
                 out[backend] = (beams.EI2.copy(), beams.GJ.copy(), collapsed, beams._kmat.copy())
             np.testing.assert_allclose(out["numba"][0], out["numpy"][0], rtol=1e-12)
             np.testing.assert_allclose(out["numba"][1], out["numpy"][1], rtol=1e-12)
@@ -274,9 +274,9 @@ def test_induced_drag_turns_the_lift_back_by_the_lifting_line_angle():
         wing = AeroelasticWing(build_kite("rhino16"), cfg)
         out[ind] = wing, wing.solve(None, flight, support="lines", warm=False)
     (w0, s0), (w1, s1) = out[False], out[True]
-    assert w0._downwash is None
+    assert w0.downwash is None
     CL = s1.lift / (0.5 * 1.225 * AIRSPEED**2 * w1.planform_area_m2)
-    alpha_i = w1._downwash[0]
+    alpha_i = w1.downwash[0]
     assert alpha_i == pytest.approx(CL / (np.pi * w1.span_efficiency * w1.aspect_ratio), rel=1e-3)
     assert 3.3 < w1.aspect_ratio < 3.7 and 0.9 < w1.span_efficiency < 1.0
     assert s1.drag - s0.drag == pytest.approx(alpha_i * s1.lift, rel=0.15)
@@ -292,7 +292,7 @@ def test_tube_tangent_is_exact_in_time_steps_and_the_secant_in_cold_solves(nomin
     _, flight, _, state = nominal
     wing = AeroelasticWing(build_kite("rhino16"), Config())
     tb = wing._tube_rows
-    asm = wing._mono_solvers["prescribed"].asm
+    asm = wing.prescribed_assembly
     _AeroLoad(wing, asm, flight, None, 1.0).force(state)
     assert np.all(wing.beams._kmat[tb] == 0.0)
     _AeroLoad(wing, asm, flight, 0.005, 1.0).force(state)

@@ -39,3 +39,57 @@ def test_agents_modules_re_export_the_library_policies():
     for name in agents.policies.__all__:
         assert getattr(agents.policies, name) is getattr(kite_env.policies, name), name
     assert kite_env.policies.MODELS_DIR.parent.name == "agents" and kite_env.policies.MODELS_DIR.name == "models"
+
+
+#: names that hold an AeroelasticWing outside kite_env/fsi.py (``wing``, ``self.wing``, ``dyn.wing``, ``self._wing``)
+_WING_NAMES = {"wing", "_wing"}
+#: calls that build one (a name assigned from them is a wing too, e.g. ``ref = AeroelasticWing(mesh, cfg)``)
+_WING_BUILDERS = {"AeroelasticWing", "nominal_wing"}
+
+
+def _name_of(node: ast.AST) -> str | None:
+    """``wing`` for ``wing``, ``self.wing``, ``dyn.wing``; the called name for a call; None otherwise."""
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    if isinstance(node, ast.Call):
+        return _name_of(node.func)
+    return None
+
+
+def _private_wing_accesses(source: str, name: str) -> list[str]:
+    """``name:line: expr`` of every attribute access ``<wing>._member`` (a single leading underscore, not a dunder)
+    in the module ``source``, ``<wing>`` a name of :data:`_WING_NAMES` or one assigned from a wing or a builder of
+    one, in the order of the source."""
+    tree = ast.parse(source, name)
+    wings = set(_WING_NAMES)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign):
+            src = _name_of(node.value)
+            if src in _WING_BUILDERS or src in _WING_NAMES:
+                wings.update(t.id for t in node.targets if isinstance(t, ast.Name))
+    hits = sorted((node.lineno, node.col_offset, ast.unparse(node)) for node in ast.walk(tree)
+                  if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
+                  and _name_of(node.value) in wings)
+    return [f"{name}:{line}: {expr}" for line, _, expr in hits]
+
+
+def test_the_scan_finds_private_accesses_of_a_wing():
+    """The scan below sees the forms the dynamics used to take (a method, an attribute written, a name bound to a
+    built wing), and not a public member or another object's private one."""
+    src = ("wing._downwashed(X)\nself.wing._downwash = None\ndyn.wing._mono_solvers['prescribed'].asm\n"
+           "ref = AeroelasticWing(mesh, cfg)\nref._solution()\nwing.solve(None, X)\nsim._flight_state(t, s)\n")
+    assert _private_wing_accesses(src, "probe.py") == [
+        "probe.py:1: wing._downwashed", "probe.py:2: self.wing._downwash", "probe.py:3: dyn.wing._mono_solvers",
+        "probe.py:5: ref._solution"]
+
+
+def test_no_module_but_fsi_reaches_into_a_wings_private_members():
+    """The wing (kite_env.fsi.AeroelasticWing) is used through its public interface: the dynamics, the analyses and
+    every other module call its public methods and properties (downwashed, update_downwash, rotate_downwash,
+    aero_options, update_tube_stiffness, prescribed_assembly, load_vector, solution, continuation, ...), never a
+    ``_private`` member, which only kite_env/fsi.py touches."""
+    found = [hit for p in sorted(LIBRARY.rglob("*.py")) if p != LIBRARY / "fsi.py"
+             for hit in _private_wing_accesses(p.read_text(), str(p.relative_to(LIBRARY.parent)))]
+    assert not found, "private members of an AeroelasticWing used outside kite_env/fsi.py:\n" + "\n".join(found)

@@ -50,7 +50,7 @@ class DynamicFlightSimulator(FlightSimulator):
         v_nodes = X.v_kite[None, :] + np.cross(X.omega[None, :], x)
         g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
         self.dyn.start(self.wing.state, v_nodes, R.T @ (st.r[KCU] - origin), R.T @ st.v[KCU], self.particles.rest,
-                       g_K, self.wing._downwashed(X).v_wind)
+                       g_K, self.wing.downwashed(X).v_wind)
         return rec
 
     # ------------------------------------------------------------------ the KCU
@@ -146,7 +146,7 @@ class DynamicFlightSimulator(FlightSimulator):
         b = dyn.bridle
         r_k, v_k, lam, drift, jerk = self._kcu_step(t, dt, dyn.a[b] @ R.T)
         X = self._X_now[1] if self._X_now is not None and self._X_now[0] is st else self._flight_state(t, st)[5]
-        X_loads = wing._downwashed(X)
+        X_loads = wing.downwashed(X)
         v_w_end = np.asarray(self.wind.velocity(t + dt, origin[None, :]), dtype=float).reshape(3)
         g_K = R.T @ np.array([0.0, 0.0, -self.cfg.dynamics.gravity_mps2])
         v_wind = R.T @ v_w_end + (X_loads.v_wind - X.v_wind)  # the wind at the step's end, with the downwash
@@ -155,7 +155,7 @@ class DynamicFlightSimulator(FlightSimulator):
         except WingConvergenceError as exc:
             raise SimulationError("wing did not converge", str(exc).splitlines()[0], str(exc)) from exc
         if self.cfg.aero.induced_drag:
-            wing._update_downwash(sol, X, dt)
+            wing.update_downwash(sol, X, dt)
         x_b, v_b = dyn.state.x[b], dyn.v[b]
         r = np.vstack([origin + x_b @ R.T, r_k[None, :]])
         v = np.vstack([v_b @ R.T, v_k[None, :]])
@@ -167,8 +167,7 @@ class DynamicFlightSimulator(FlightSimulator):
         dyn.rebase(Q, p)
         self._frame_now = (o2, R2)
         self._X_now = (new, X_e)  # the wing state of the next step's start
-        if wing._downwash is not None:
-            wing._downwash = (wing._downwash[0], Q @ wing._downwash[1])
+        wing.rotate_downwash(Q)
         sol.nodes = dyn.state.x.copy()
         sol.F_b = sol.F_b @ Q.T
         sol.aero_force = Q @ sol.aero_force

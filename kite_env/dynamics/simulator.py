@@ -216,7 +216,7 @@ class FlightSimulator:
         """The start's static wing where its cold solve (a load ramp from the unloaded wing) fails: a continuation in
         the kite's speed. The cold solve is made at the same start flown faster (``START_SPEED_FACTORS``: the
         apparent wind closer to the chord, a smaller angle of attack), then the speed is brought back to the
-        start's in warm solves by :meth:`AeroelasticWing._continuation` (a quarter of the way at most, halved where
+        start's in warm solves by :meth:`AeroelasticWing.continuation` (a quarter of the way at most, halved where
         a solve fails). Where the cold solve failed, a start in turbulence at 4 m/s (17.6 m/s: the inflow 11 deg off
         the path) had no converged wing and the env drew the start again (docs/environment.md, "Starts")."""
         wing = self.wing
@@ -234,7 +234,7 @@ class FlightSimulator:
             wing.reset()  # (a failed solve leaves its factorisations, secants and line tensions behind)
             try:
                 last[:] = [wing.solve(None, at(0.0), support="lines", warm=False)]
-                wing._continuation(wing.state, 0.0, 1.0, 0.25, solve_at, [])
+                wing.continuation(wing.state, 0.0, 1.0, 0.25, solve_at, [])
             except WingConvergenceError as exc:
                 errors.append(f"x{f}: {str(exc).splitlines()[0]}")
                 continue

@@ -177,7 +177,7 @@ class _StepLoad:
         self.u_ref = V
         self.inflow = self.v_wind - V  # "wind" of section_loads with v_kite = omega = 0
         self.C = section_damping(x_sec0, mesh.section_tube_d, mesh.section_width, np.zeros(3), np.zeros(3),
-                                 self.inflow, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                                 self.inflow, wing.cfg.aero.rho_kg_m3, **wing.aero_options())
         # structural (Rayleigh) damping beta K_T(x) on the translations, of the motion relative to the rigid one; its
         # tangent is the structure's at the first iterate of a step, ``at`` (the Newton start), assembled in the
         # first call of force() and handed to the solver for that iterate (:meth:`assembled`), not assembled twice;
@@ -248,9 +248,9 @@ class _StepLoad:
         dyn, wing = self.dyn, self.dyn.wing
         mesh = wing.mesh
         a, v = self.kinematics(st)
-        self.collapsed = wing._update_tube_stiffness(st)
+        self.collapsed = wing.update_tube_stiffness(st)
         if self.beta_K > 0.0 and self.K0 is None:
-            asm = wing._mono_solvers["prescribed"].asm
+            asm = wing.prescribed_assembly
             f_int, kd = asm.assemble_data(st.x, st.Rn, tangent=True)
             self._pre = (st, f_int, kd)
             self.K0 = kd  # (on the nodal translations alone in the force: WingDynamics.translation_product)
@@ -261,11 +261,11 @@ class _StepLoad:
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         self.loads = section_loads(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
-                                   wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                                   wing.cfg.aero.rho_kg_m3, **wing.aero_options())
         # (the loads' own new array: the damping forces added in place)
         self.loads.nodal_forces[...] -= self.W[:, :, None] * np.einsum("ikl,il->ik", self.C,
                                                                         self.section_deviation(v))[:, None, :]
-        f = wing._load_vector(self.loads)
+        f = wing.load_vector(self.loads)
         f6 = f.reshape(-1, 6)
         if self.K0 is not None:
             f6[:, :3] -= self.rayleigh_force(v - self.v_rigid)
@@ -366,12 +366,12 @@ class _StepLoad:
         loads 3.59 Hz at 1.0 %, as the stepped rig; docs/steering.md, "The yaw rig")."""
         dyn, wing = self.dyn, self.dyn.wing
         mesh = wing.mesh
-        asm = wing._mono_solvers["prescribed"].asm
+        asm = wing.prescribed_assembly
         _, v = self.kinematics(st)
         x_sec = st.x[mesh.sections]
         zero = np.zeros(3)
         _, J = load_jacobian(x_sec, mesh.section_tube_d, mesh.section_width, zero, zero, self.inflow,
-                             wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                             wing.cfg.aero.rho_kg_m3, **wing.aero_options())
         n_sec, m, _ = x_sec.shape
         W = self.W
         Cn = W[:, :, None, None, None] * W[:, None, None, :, None] * self.C[:, None, :, None, :]  # (i, j, k, n, l)
@@ -426,7 +426,7 @@ class WingDynamics:
         d = cfg.dynamics
         self.k_c, self.c_c = float(d.line_stiffness_N_per_m), float(d.line_damping_Ns_per_m)
         self.line_drag = -0.5 * cfg.aero.rho_kg_m3 * d.line_cd * d.line_diameter_m
-        asm = wing._mono_solvers["prescribed"].asm
+        asm = wing.prescribed_assembly
         self.solver = StaticSolver(asm, mode="modified", max_iter=cfg.fsi.max_newton_iter, contraction=0.5,
                                    nodal_rot_limit=True, error_estimate=True)
         n = mesh.n_nodes
@@ -819,10 +819,8 @@ class WingDynamics:
         self.w, self.aw = w, aw
         wing.state = st
         T, _, e = load.line
-        wing._free_flight = flight
         F_b = r.reshape(-1, 6)[self.bridle, :3].copy() if self.hold_bridle else -T[:, None] * e
-        sol = wing._solution(st, load.loads, F_b, flight, 1.0, history, res.iterations, load.collapsed,
-                             res.accepted)
+        sol = wing.solution(st, load.loads, F_b, flight, history, res.iterations, load.collapsed, res.accepted)
         return sol
 
     def _predict(self, dt: float) -> NodalState:

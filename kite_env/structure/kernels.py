@@ -261,7 +261,7 @@ _SECANT_TINY = 1e-12
 @njit(**_JIT)
 def tube_secants(th, L0, rows, EI0, M_max, kappa_collapse, GJ0, c2, kappa_fold, kappa_closed, energy, with_tangent,
                  EI_out, GJ_out, collapsed_out, gb_out, gt_out):
-    """Breukels' secant tube stiffnesses from the local end rotations (``AeroelasticWing._update_tube_stiffness``).
+    """Breukels' secant tube stiffnesses from the local end rotations (``AeroelasticWing.update_tube_stiffness``).
 
     th : (n_beams, 2, 3) float [rad], L0 : (n_beams,) float [m]   local end rotations (:func:`beam_local_rotations`)
     and the lengths the curvatures are per (unloaded for ``energy``, the current chord for the larger-end law);

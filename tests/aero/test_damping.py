@@ -55,7 +55,7 @@ def wing_shapes():
 def damping(wing, x, flight):
     mesh = wing.mesh
     return section_damping(x, mesh.section_tube_d, mesh.section_width, flight.v_kite, flight.omega, flight.v_wind,
-                           wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                           wing.cfg.aero.rho_kg_m3, **wing.aero_options())
 
 
 def raw_damping(wing, x, flight, h=1e-3):
@@ -69,7 +69,7 @@ def raw_damping(wing, x, flight, h=1e-3):
         e[k] = h
         F = [section_loads(x, mesh.section_tube_d, mesh.section_width, flight.v_kite, flight.omega,
                            flight.v_wind - s * e, wing.cfg.aero.rho_kg_m3, spanwise=span,
-                           **wing._aero_options()).nodal_forces.sum(axis=1)
+                           **wing.aero_options()).nodal_forces.sum(axis=1)
              for s in (1.0, -1.0)]
         C[:, :, k] = -(F[0] - F[1]) / (2.0 * h)
     return C
@@ -94,7 +94,7 @@ def analytic_damping(wing, x, flight, d_alpha=1e-6):
     dCL = (coef[1][0] - coef[2][0]) / (2.0 * d_alpha)
     dCD = (coef[1][1] - coef[2][1]) / (2.0 * d_alpha)
     # 3-D induced drag where the configuration enables it (C_D += f C_L^2; f = 0 otherwise and in the paper)
-    f_ind = wing._aero_options().get("induced_drag_factor", 0.0)
+    f_ind = wing.aero_options().get("induced_drag_factor", 0.0)
     CD, dCD = CD + f_ind * CL**2, dCD + 2.0 * f_ind * CL * dCL
     k = 0.5 * cfg.aero.rho_kg_m3 * V * g.chord * mesh.section_width  # q c w / V
     M = k[:, None, None] * np.stack([np.stack([2.0 * CD, dCD - CL], -1), np.stack([2.0 * CL, dCL + CD], -1)], -2)
@@ -208,7 +208,7 @@ def test_projection_is_inactive_where_the_raw_damping_is_psd_and_exact_where_not
     # attached flow, yet indefinite: unloaded wing at alpha_k = 20 deg
     f20 = FlightState.wind_tunnel(AIRSPEED, np.deg2rad(20.0))
     loads = section_loads(shapes["unloaded"], wing.mesh.section_tube_d, wing.mesh.section_width, f20.v_kite,
-                          f20.omega, f20.v_wind, wing.cfg.aero.rho_kg_m3, **wing._aero_options())
+                          f20.omega, f20.v_wind, wing.cfg.aero.rho_kg_m3, **wing.aero_options())
     _, _, margin = analytic_damping(wing, shapes["unloaded"], f20)
     g = section_geometry(shapes["unloaded"], wing.mesh.section_tube_d)
     dCL = lei_coefficients(loads.alpha + 1e-6, g.t, g.kappa)[0] - lei_coefficients(loads.alpha - 1e-6, g.t, g.kappa)[0]
@@ -314,7 +314,7 @@ def test_time_step_tangent_matches_finite_differences_of_the_load(time_step):
     difference of load_jacobian). The damping block is a large part of these columns: the static tangent alone
     misses the difference by 19 % (near the tip) to 113 % of the column norm (asserted > 15 %)."""
     wing, flight, _ = time_step
-    asm = wing._mono_solvers["prescribed"].asm
+    asm = wing.prescribed_assembly
     state = wing.state.copy()
     load = _AeroLoad(wing, asm, flight, DT, 1.0)
     T = asm.matrix(load.tangent(state)).tocsc()
@@ -347,7 +347,7 @@ def _free_dofs(wing, q_b):
 def _first_order_system(wing, flight, q_b, kind):
     """Static tangent K (structure + aero stiffness) and damping C = (T_dt - K) dt on the free DOF (A-D's
     translations prescribed) at the committed state x = x_prev, with the damping model ``kind``."""
-    asm = wing._mono_solvers["prescribed"].asm
+    asm = wing.prescribed_assembly
     state = wing.state.copy()
     free = _free_dofs(wing, q_b)
     cfg0 = wing.cfg

@@ -567,7 +567,7 @@ def test_the_rayleigh_tangent_is_held_over_its_period_and_turned_with_the_frame(
     assert load.K0 is kd and load.K0_turn is Q and np.abs(Q - np.eye(3)).max() > 1e-5  # the frame has turned
     # the covariance itself, on a turn large enough to see: a tangent assembled at the shape and held over a turn Q
     # gives the force of the tangent assembled at the turned shape
-    asm = d.wing._mono_solvers["prescribed"].asm
+    asm = d.wing.prescribed_assembly
     st = d.state
     _, k0 = asm.assemble_data(st.x, st.Rn, tangent=True)
     a = np.array([0.2, -0.3, 0.25])
