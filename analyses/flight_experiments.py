@@ -1,11 +1,11 @@
-"""Diagnostic flight experiments behind the README's "Flight dynamics" tables (not part of the package API).
+"""Diagnostic flight experiments with the baseline controller: time-step convergence and a few perturbed flights.
 
-    python scripts/flight_experiments.py branch --at 3.5 --hold 0.8 [--variants hold,mB_x0.5,...] [--set k=v ...]
-    python scripts/flight_experiments.py eig --at 3.5 [--steps 4]
-    python scripts/flight_experiments.py openloop --dl 0.3 [--duration 4]
-    python scripts/flight_experiments.py trim --shorten 0.06 [--duration 8]
-    python scripts/flight_experiments.py damp --factor 100 [--duration 25]
-    python scripts/flight_experiments.py timestep [--duration 10] [--steps 0.005,0.01,0.0025] [--set k=v ...]
+    python analyses/flight_experiments.py branch --at 3.5 --hold 0.8 [--variants hold,mB_x0.5,...] [--set k=v ...]
+    python analyses/flight_experiments.py eig --at 3.5 [--steps 4]
+    python analyses/flight_experiments.py openloop --dl 0.3 [--duration 4]
+    python analyses/flight_experiments.py trim --shorten 0.06 [--duration 8]
+    python analyses/flight_experiments.py damp --factor 100 [--duration 25]
+    python analyses/flight_experiments.py timestep [--duration 10] [--steps 0.005,0.01,0.0025] [--set k=v ...]
 
 branch    fly the baseline closed loop to --at, then fly deep copies for --hold seconds with the steering held and one
           change each; prints the right tip's alpha peak-to-peak per quarter and how each copy ends.
@@ -18,6 +18,10 @@ timestep  the baseline (kite-eval's flight) at each time step of --steps: Newton
           first step the largest distance of the KCU at the common instants and the mean traction after 1 s
           (the time-step check; docs/validation.md, "Time-step convergence"; docs/performance.md, "Newton's
           iterations").
+
+``timestep`` is reported in docs/validation.md, "Time step and Newton tolerance" and "Time-step convergence",
+docs/model.md, "Theodorsen's force", and docs/performance.md, "The carried residual"; the other experiments are
+diagnostics of the flight's stability (they print what they find; no doc section quotes them now). Not run in CI.
 """
 
 from __future__ import annotations

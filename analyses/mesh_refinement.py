@@ -1,7 +1,7 @@
 """The wing under mesh refinement: the static aeroelastic wing at one wind-tunnel state on several meshes.
 
-    python scripts/mesh_refinement.py [--meshes 37x6,55x6,73x6,37x4,37x5,37x7] [--airspeed 25] [--alpha-deg 8]
-                                      [--set section.key=value ...]
+    python analyses/mesh_refinement.py [--meshes 37x6,55x6,73x6,37x4,37x5,37x7] [--airspeed 25] [--alpha-deg 8]
+                                       [--set section.key=value ...]
 
 For each mesh ``SECTIONSxCHORD`` (``kite.n_sections`` x ``kite.n_chord``) the nominal wing is solved cold at the
 wind-tunnel state (A-D prescribed at their design positions, the inflow in the ``x_k``-``z_k`` plane at
@@ -9,9 +9,12 @@ wind-tunnel state (A-D prescribed at their design positions, the inflow in the `
 sections' own lift-to-drag ratio ``sum_i |L_i| / sum_i D_i`` (Breukels' 2-D regression at each section's angle) and
 the C-shaped arc's projection ``|sum_i L_i| / sum_i |L_i|`` (the sections' lifts point in different directions,
 their drags add up); the mid-wing angle of attack; and the wing's stiffness at the steering point B along its line
-with A, C, D held (``kite_env.turn_rate.steering_point_stiffness``) with the share of a steering input that moves
-the wing against Table 1's line. A mesh whose cold solve does not reach an equilibrium is reported as such.
-docs/validation.md, "Mesh refinement, L/D, the figure's elevation".
+with A, C, D held (``kite_env.analysis.turn_rate.steering_point_stiffness``) with the share of a steering input that
+moves the wing against Table 1's line. A mesh whose cold solve does not reach an equilibrium is reported as such.
+
+Reported in docs/validation.md, "Mesh refinement, L/D, the figure's elevation" (and docs/model.md, "The aeroelastic
+wing"). Not run in CI; tests/aero/test_mesh_refinement.py checks the convergence and the L/D split
+(:func:`kite_env.analysis.lift_to_drag.lift_to_drag_factors`) on fewer meshes.
 """
 
 from __future__ import annotations
@@ -33,28 +36,13 @@ def _meshes(spec: str) -> list[tuple[int, int]]:
     return out
 
 
-def lift_to_drag_factors(section_forces, v_ref):
-    """``(wing L/D, sections' L/D, projection)`` of the nodal aerodynamic forces ``section_forces`` (n_sec, m, 3) [N]
-    (a solution's :attr:`kite_env.fsi.WingSolution.section_forces`) about the reference apparent velocity ``v_ref``
-    (3,) [m/s]; the first is the product of the other two. Each section's force splits into its drag ``D_i`` along
-    the reference flow and its lift ``L_i`` across it."""
-    import numpy as np
-
-    F = np.asarray(section_forces, dtype=float).sum(axis=1)
-    e_d = -np.asarray(v_ref, dtype=float) / np.linalg.norm(v_ref)
-    D = F @ e_d
-    L = F - np.outer(D, e_d)
-    lift_sum = float(np.sum(np.linalg.norm(L, axis=1)))
-    return (float(np.linalg.norm(L.sum(axis=0)) / D.sum()), lift_sum / float(D.sum()),
-            float(np.linalg.norm(L.sum(axis=0))) / lift_sum)
-
-
 def main(argv=None) -> int:
     import numpy as np
 
+    from kite_env.analysis.lift_to_drag import lift_to_drag_factors
+    from kite_env.analysis.turn_rate import steering_point_stiffness
     from kite_env.config import ConfigError, load_config
     from kite_env.fsi import FlightState, WingConvergenceError, nominal_wing
-    from kite_env.turn_rate import steering_point_stiffness
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--meshes", default="37x6,55x6,73x6,37x4,37x5,37x7", help="SECTIONSxCHORD, comma separated")

@@ -1,17 +1,20 @@
 """Where a steering input goes: the wing's stiffness at the steering-line points B and D along their lines, at states
 of the baseline flight, split by what supplies it.
 
-    python scripts/steering_stiffness.py [--times 4,6,8,12] [--set section.key=value ...]
+    python analyses/steering_stiffness.py [--times 4,6,8,12] [--set section.key=value ...]
 
 Flies the paper's controller with the quasi-static wing (``structure.dynamic=false``: the stiffness is that of the
 static aeroelastic equilibrium) and, at each time, solves the wing at the step's end state and linearises it there
-with A-D held (:func:`kite_env.turn_rate.steering_point_stiffness`; the flight goes on from that solution, a warm
-start within the solver's tolerance of its own). A change ``dL`` of a steering line's rest length moves its
+with A-D held (:func:`kite_env.analysis.turn_rate.steering_point_stiffness`; the flight goes on from that solution, a
+warm start within the solver's tolerance of its own). A change ``dL`` of a steering line's rest length moves its
 wing point by ``share dL``, ``share = k_line / (k_line + k_wing)``; the rest stretches the line (its stiffness
 ``dynamics.line_stiffness_N_per_m``, Table 1: 4.52 kN/m). Columns: the stiffness with the aerodynamic loads
 following the shape (``coupled``) and held (``frozen``) [kN/m], each group's ``u^T K_g u`` along the coupled
 deformation [kN/m] (``aero`` is minus the work the loads do), the share, and the pitch change of the point's tip
-section per metre [deg/m]. docs/steering.md, "Where a steering input goes".
+section per metre [deg/m].
+
+Reported in docs/steering.md, "Where a steering input goes". Not run in CI; tests/dynamics/test_steering_stiffness.py
+checks the linearisation (at the wind-tunnel state) against the static solve.
 """
 
 from __future__ import annotations
@@ -23,11 +26,11 @@ import sys
 def main(argv=None) -> int:
     import numpy as np
 
+    from kite_env.analysis.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
     from kite_env.config import ConfigError, load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.flight import evaluation_config
     from kite_env.policies.baseline import BaselineAgent
-    from kite_env.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--times", default="4,6,8,12", help="flight times [s], comma separated, increasing")

@@ -1,11 +1,17 @@
 """Open-loop steering authority of the full model: yaw rate per steering input at a few wind speeds.
 
-    python scripts/turn_rate.py [--dl=-0.2,0.1,0.2,0.3] [--wind 5,7] [--set section.key=value ...]
+    python analyses/turn_rate.py [--dl=-0.2,0.1,0.2,0.3] [--wind 5,7] [--no-force-loop] [--set section.key=value ...]
 
-Prints a table of the neutral-subtracted yaw rate ``omega_k . z_k`` per held steering-line difference dL = L_B - L_D
-(kite_env.turn_rate), with the paper's force controller on the common rest length (``--no-force-loop``: both held):
-about 5 rad/s per m in the paper's Fig. 16, 2.5-5 in V3 flight data. (The rate of the heading on the tangent plane is
-not a measure here: the neutral flight climbs towards the zenith, where the heading's reference turns fast.)
+Measures the neutral-subtracted yaw rate ``omega_k . z_k`` per held steering-line difference dL = L_B - L_D, flown
+open loop from the figure's crossing (:func:`kite_env.analysis.turn_rate.turn_rate_table`), with the paper's force
+controller on the common rest length (``--no-force-loop``: both held): about 5 rad/s per m in the paper's Fig. 16,
+2.5-5 in V3 flight data. (The rate of the heading on the tangent plane is not a measure here: the neutral flight
+climbs towards the zenith, where the heading's reference turns fast.) Prints one row per wind speed and input: the
+yaw rate, its rate per metre, the airspeed, the smaller steering-line tension and how the flight ended.
+
+Reported in docs/steering.md, "Summary" and "The open-loop turn rate" (also "Where a steering input goes", "The von
+Karman membrane") and docs/model.md, "Theodorsen's force" and "The ground station". Not run in CI;
+tests/dynamics/test_flight_model.py flies the same table.
 """
 
 from __future__ import annotations
@@ -15,8 +21,8 @@ import sys
 
 
 def main(argv=None) -> int:
+    from kite_env.analysis.turn_rate import turn_rate_table
     from kite_env.config import ConfigError, load_config
-    from kite_env.turn_rate import turn_rate_table
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dl", default="-0.2,0.1,0.2,0.3",

@@ -1,6 +1,7 @@
 """The package's layers: the library (``kite_env``) never imports the top-level ``agents`` package (its recipes and
 shipped models are data, found by path), and ``agents.baseline`` / ``agents.policies`` hand on the library's own
-policies to users' imports."""
+policies to users' imports; the analyses (``kite_env.analysis``) are imported by nothing else of the library; the wing
+(``kite_env.fsi.AeroelasticWing``) is used through its public interface."""
 
 from __future__ import annotations
 
@@ -11,13 +12,22 @@ LIBRARY = Path(__file__).resolve().parents[1] / "kite_env"
 
 
 def _imported_modules(path: Path) -> set[str]:
-    """Every module an ``import`` statement of ``path`` names, at any depth (function-local imports too)."""
+    """Every module an ``import`` statement of ``path`` names, at any depth (function-local imports too); ``from m
+    import a`` names ``m`` and ``m.a`` (``a`` may be a submodule), a relative import is resolved against the package
+    of ``path`` (a file of ``kite_env``)."""
     names: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.add(node.module)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                package = path.relative_to(LIBRARY.parent).parent.parts
+                base = list(package[:len(package) - (node.level - 1)])
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            names.add(module)
+            names.update(f"{module}.{a.name}" for a in node.names)
     return names
 
 
@@ -25,6 +35,18 @@ def test_the_library_never_imports_the_agents_package():
     offenders = {str(p.relative_to(LIBRARY.parent)): sorted(m for m in _imported_modules(p)
                                                             if m == "agents" or m.startswith("agents."))
                  for p in sorted(LIBRARY.rglob("*.py"))}
+    assert {p: m for p, m in offenders.items() if m} == {}
+
+
+def test_only_the_analyses_import_the_analysis_package():
+    """kite_env.analysis holds analyses of the model (turn-rate linearisations, steering stiffness, the L/D split):
+    they build on the library, nothing of the library (the env, the dynamics, the wing, the CLIs) builds on them."""
+    analysis = LIBRARY / "analysis"
+    assert (analysis / "__init__.py").is_file()
+    offenders = {str(p.relative_to(LIBRARY.parent)): sorted(m for m in _imported_modules(p)
+                                                            if m == "kite_env.analysis"
+                                                            or m.startswith("kite_env.analysis."))
+                 for p in sorted(LIBRARY.rglob("*.py")) if analysis not in p.parents}
     assert {p: m for p, m in offenders.items() if m} == {}
 
 

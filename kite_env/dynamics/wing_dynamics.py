@@ -361,7 +361,7 @@ class _StepLoad:
         ``W^T C_i W``, the line dampers) and mass ``M`` (nodal blocks with the added mass): the Newton tangent of a
         step, over which the reference inflow ``u_ref`` is held. They are not the free wing's linearised motion:
         between steps ``u_ref`` follows the wing's rigid translation, whose loads (forces and the moment of Eq. 9, not
-        projected) replace the section damping's response to it; :func:`kite_env.turn_rate.tethered_wing_modes`
+        projected) replace the section damping's response to it; :func:`kite_env.analysis.turn_rate.tethered_wing_modes`
         linearises that (with ``C`` alone the rig's yaw mode is 2.93 Hz at 15.8 % of critical, with the translation's
         loads 3.59 Hz at 1.0 %, as the stepped rig; docs/steering.md, "The yaw rig")."""
         dyn, wing = self.dyn, self.dyn.wing

@@ -1,5 +1,5 @@
-"""The static aeroelastic wing under mesh refinement (scripts/mesh_refinement.py; docs/validation.md, "Mesh refinement,
-L/D, the figure's elevation").
+"""The static aeroelastic wing under mesh refinement (the study analyses/mesh_refinement.py; docs/validation.md, "Mesh
+refinement, L/D, the figure's elevation").
 
 Spanwise the default 37 sections are converged for what the flight uses; chordwise the wing's L/D falls as the
 canopy's billow is resolved: Eq. (6) takes the camber as the largest height of the section's nodes above its chord,
@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from kite_env.aero.sections import section_geometry
+from kite_env.analysis.lift_to_drag import lift_to_drag_factors
+from kite_env.analysis.turn_rate import steering_point_stiffness
 from kite_env.config import load_config
 from kite_env.fsi import FlightState, nominal_wing
-from kite_env.turn_rate import steering_point_stiffness
 
 FLIGHT = FlightState.wind_tunnel(25.0, np.deg2rad(8.0))
 
@@ -23,13 +24,14 @@ def _solved(n_sections, n_chord, *overrides):
     return wing, sol
 
 
-def test_the_lift_to_drag_ratio_is_the_sections_own_times_the_arcs_projection(load_script):
-    """The wing's L/D (``wing_totals``, the solution's) equals the product of its two factors; the sections' own
-    L/D is that of Breukels' 2-D regression at their angles (17-21 at 7-9 deg), the C-shaped arc keeps about two
-    thirds of their lift (measured: 18.1 x 0.654 = 11.86)."""
-    mod = load_script("mesh_refinement")
+def test_the_lift_to_drag_ratio_is_the_sections_own_times_the_arcs_projection():
+    """The wing's L/D (``wing_totals``, the solution's; 11.86 on the default mesh at this state) equals the product of
+    its two factors (kite_env.analysis.lift_to_drag); the sections' own L/D is that of Breukels' 2-D regression at
+    their angles (17-21 at 7-9 deg), the C-shaped arc keeps about two thirds of their lift (measured: 18.1 x 0.654 =
+    11.86)."""
     _, sol = _solved(37, 6)
-    ld, ld_sec, proj = mod.lift_to_drag_factors(sol.section_forces, FLIGHT.v_kite - FLIGHT.v_wind)
+    ld, ld_sec, proj = lift_to_drag_factors(sol.section_forces, FLIGHT.v_kite - FLIGHT.v_wind)
+    assert sol.lift_to_drag == pytest.approx(11.86, abs=0.01)
     assert ld == pytest.approx(sol.lift_to_drag, rel=1e-9)
     assert ld == pytest.approx(ld_sec * proj, rel=1e-12)
     assert 16.0 < ld_sec < 20.0 and 0.6 < proj < 0.7
@@ -67,20 +69,6 @@ def test_chordwise_refinement_resolves_more_camber_and_lowers_the_lift_to_drag_r
     assert np.all(np.diff(ld) < 0.0)
     assert kappa[-1] > kappa[0] + 0.015 and np.all(np.diff(kappa) > -1e-3)
     assert ld[2] / ld[3] - 1.0 < 0.05  # 37x6 within 5 % of 37x7 (measured 2.5 %)
-
-
-def test_the_script_prints_one_row_per_mesh_and_refuses_bad_input(load_script, capsys):
-    """``scripts/mesh_refinement.py --meshes 37x6``: one row (the default mesh, L/D 11.86 at this state); a bad mesh,
-    speed or key: exit 2 and one line."""
-    mod = load_script("mesh_refinement")
-    assert mod.main(["--meshes", "37x6"]) == 0
-    rows = [ln.split() for ln in capsys.readouterr().out.splitlines()[2:]]
-    assert len(rows) == 1 and rows[0][0] == "37x6" and float(rows[0][3]) == pytest.approx(11.86, abs=0.01)
-    for bad in (["--meshes", "37x"], ["--meshes", "36x6"], ["--airspeed", "0"],
-                ["--set", "structure.canopy_shear_ratio=2"]):
-        assert mod.main(bad) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith("mesh_refinement:")
 
 
 def test_a_cold_solve_whose_load_ramp_fails_is_made_again_with_a_finer_ramp():

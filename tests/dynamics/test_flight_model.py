@@ -1,4 +1,4 @@
-"""The flying full model's steering authority: open-loop turns (kite_env.turn_rate), the paper's configuration
+"""The flying full model's steering authority: open-loop turns (kite_env.analysis.turn_rate), the paper's configuration
 (configs/paper.yaml) flying the figure, and Theodorsen's added-mass force against ``M_a a`` alone."""
 
 from pathlib import Path
@@ -6,14 +6,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from kite_env.analysis.turn_rate import open_loop_flight, turn_rate_table
 from kite_env.config import load_config
 from kite_env.flight import fly
-from kite_env.turn_rate import open_loop_flight, turn_rate_table
 
 
 def test_held_steering_input_turns_the_kite_the_right_way_and_faster_with_more_input():
-    """Open loop from the crossing (kite_env.turn_rate): L_B - L_D = dL held; a longer right line (dL > 0) turns
-    the kite with a positive yaw rate about z_k, a shorter one negatively, and the rate grows with |dL|."""
+    """Open loop from the crossing (kite_env.analysis.turn_rate): L_B - L_D = dL held; a longer right line (dL > 0)
+    turns the kite with a positive yaw rate about z_k, a shorter one negatively, and the rate grows with |dL|."""
     cfg = load_config(None, [])
     rows = turn_rate_table(cfg, dls_m=(-0.2, 0.1, 0.2), window_s=(0.5, 1.5))
     rate = {r["dl_m"]: r["yaw_rate_rad_s"] for r in rows}
@@ -24,11 +24,11 @@ def test_held_steering_input_turns_the_kite_the_right_way_and_faster_with_more_i
 
 
 def test_the_open_loop_flight_flies_the_configured_wing_with_the_force_loop_holding_the_lines(monkeypatch):
-    """kite_env.turn_rate.open_loop_flight: it builds the simulator of the configuration (the wing with
+    """kite_env.analysis.turn_rate.open_loop_flight: it builds the simulator of the configuration (the wing with
     inertia by default, not always the quasi-static wing), and the force controller on the common rest length
     keeps both steering lines loaded through the window; with both rest lengths held (force_loop=False) the climbing
     kite's released line goes slack."""
-    import kite_env.turn_rate as tr
+    import kite_env.analysis.turn_rate as tr
     from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
 
     built = []
@@ -49,20 +49,13 @@ def test_open_loop_flight_reports_the_window_means():
     assert r.end == "ok" and np.isfinite(r.yaw_rate_rad_s) and r.airspeed_mps > 10.0
 
 
-def test_the_turn_rate_script_prints_a_row_per_input_and_refuses_bad_input(load_script, capsys):
-    """``scripts/turn_rate.py --dl=0.1 --wind 5``: one row, the wing with inertia turning at 1.7-1.8 rad/s per m with
-    its steering lines loaded (the force loop on); a zero or unreadable input or a bad key: exit 2, one line."""
-    mod = load_script("turn_rate")
-    assert mod.main(["--dl=0.1", "--wind", "5"]) == 0
-    out = capsys.readouterr().out.splitlines()
-    assert "line min [N]" in out[0] and len(out) == 2
-    wind, dl, _, per_m, airspeed, line_min, end = out[1].split()
-    assert (float(wind), float(dl), end) == (5.0, 0.1, "ok")
-    assert 1.4 < float(per_m) < 2.2 and float(airspeed) > 20.0 and float(line_min) > 100.0
-    for bad in (["--dl", "0"], ["--dl", "x"], ["--set", "structure.membrane_forces=wrong"]):
-        assert mod.main(bad) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith("turn_rate:")
+def test_a_held_input_turns_the_wing_with_inertia_at_about_two_radians_per_second_per_metre():
+    """The open-loop table of analyses/turn_rate.py at ``--dl=0.1 --wind 5`` (its default window, the force loop on):
+    the wing with inertia turns at 1.4-2.2 rad/s per m of held input (docs/steering.md, "The open-loop turn rate":
+    2.18; the paper's Fig. 16 about 5, V3 flight data 2.5-5) with both steering lines loaded."""
+    (row,) = turn_rate_table(load_config(None, []), dls_m=(0.1,), wind_speeds_mps=(5.0,))
+    assert (row["wind_mps"], row["dl_m"], row["end"]) == (5.0, 0.1, "ok")
+    assert 1.4 < row["per_m"] < 2.2 and row["airspeed_mps"] > 20.0 and row["steering_line_min_N"] > 100.0
 
 
 PAPER = Path(__file__).resolve().parents[2] / "configs" / "paper.yaml"

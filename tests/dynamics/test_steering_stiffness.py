@@ -1,13 +1,13 @@
-"""Where a steering input goes (kite_env.turn_rate.steering_point_stiffness): the wing's linearised stiffness at the
-steering-line points along their lines, checked against the static aeroelastic solve (docs/steering.md, "Where a
-steering input goes")."""
+"""Where a steering input goes (kite_env.analysis.turn_rate.steering_point_stiffness): the wing's linearised stiffness
+at the steering-line points along their lines, checked against the static aeroelastic solve (docs/steering.md, "Where
+a steering input goes")."""
 
 import numpy as np
 import pytest
 
+from kite_env.analysis.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
 from kite_env.config import load_config
 from kite_env.fsi import FlightState, nominal_wing
-from kite_env.turn_rate import STIFFNESS_PARTS, steering_point_stiffness
 
 K_LINE = 4.52e3  # Table 1
 
@@ -82,26 +82,10 @@ def test_the_paper_s_von_karman_canopy_is_softer_at_the_steering_point(loaded):
     assert vk.share > gl.share + 0.05
 
 
-def test_the_script_prints_both_steering_points_at_a_flight_state_and_refuses_bad_input(load_script, capsys):
-    """``scripts/steering_stiffness.py --times 1``: one row for B and one for D at t = 1 s of the baseline, the
-    share within (0, 1) and the tip pitching about one radian per tip chord; a bad time or key: exit 2, one line."""
-    mod = load_script("steering_stiffness")
-    assert mod.main(["--times", "1"]) == 0
-    rows = [ln.split() for ln in capsys.readouterr().out.splitlines()[1:]]
-    assert [r[2] for r in rows] == ["B", "D"]
-    for r in rows:
-        assert float(r[0]) == pytest.approx(1.0, abs=0.03)
-        assert 0.0 < float(r[-2]) < 1.0 and 60.0 < float(r[-1]) < 120.0
-    for bad in (["--times", "-1"], ["--times", "x"], ["--set", "structure.canopy_shear_ratio=2"]):
-        assert mod.main(bad) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith("steering_stiffness:")
-
-
 def _open_loop_rate(k_line, dynamic=True):
-    """Neutral-subtracted open-loop yaw rate per metre of a held 0.2 m input [rad/s per m] (kite_env.turn_rate: the
-    force loop on the common rest length), with the wing with inertia (default) or the quasi-static wing."""
-    from kite_env.turn_rate import turn_rate_table
+    """Neutral-subtracted open-loop yaw rate per metre of a held 0.2 m input [rad/s per m] (kite_env.analysis.turn_rate:
+    the force loop on the common rest length), with the wing with inertia (default) or the quasi-static wing."""
+    from kite_env.analysis.turn_rate import turn_rate_table
 
     cfg = load_config(None, [f"dynamics.line_stiffness_N_per_m={k_line}", f"structure.dynamic={str(dynamic).lower()}"])
     (row,) = turn_rate_table(cfg, dls_m=(0.2,), window_s=(0.5, 1.5))
@@ -134,7 +118,7 @@ def test_a_quasi_steady_lateral_balance_predicts_the_open_loop_turn_rate_of_the_
     five times as much, of the other sign: the kite turns towards its side force, the sideslip's weathervane moment
     sets the rate. The wing with inertia turns faster (1.71: its nodal and added mass are not in this massless
     balance; docs/steering.md, "The open-loop turn rate")."""
-    from kite_env.turn_rate import lateral_balance
+    from kite_env.analysis.turn_rate import lateral_balance
 
     lb = lateral_balance(load_config(None, []), 25.0, np.deg2rad(8.0))
     quasi_static = _open_loop_rate(K_LINE, dynamic=False)

@@ -992,13 +992,13 @@ def test_the_normal_rate_forces_tangent_matches_finite_differences():
 
 
 def test_the_wing_on_its_lines_carries_the_yaw_twist_mode():
-    """kite_env.turn_rate.tethered_wing_yaw_response: the wing with inertia on its lines from a fixed KCU (30 m/s,
-    kite angle 8 deg), at rest on them and kicked with 0.5 rad/s of yaw, oscillates at 3.7 Hz (the baseline flight's
-    3.9 Hz yaw/twist oscillation; held at A-D the wing shows none). Measured at a structural damping of
+    """kite_env.analysis.turn_rate.tethered_wing_yaw_response: the wing with inertia on its lines from a fixed KCU
+    (30 m/s, kite angle 8 deg), at rest on them and kicked with 0.5 rad/s of yaw, oscillates at 3.7 Hz (the baseline
+    flight's 3.9 Hz yaw/twist oscillation; held at A-D the wing shows none). Measured at a structural damping of
     ``rayleigh_beta_s`` 6.4e-4 s, where Theodorsen's normal-rate part of the added mass's force keeps the mode from
     decaying (1.54 deg in the first half second, 1.65 deg at 2.5-3 s; with ``M_a a`` alone it decayed, to a quarter:
     docs/steering.md, "The yaw rig"); the default's 1.6e-3 s damps it (docs/model.md, "Structural damping")."""
-    from kite_env.turn_rate import tethered_wing_yaw_response
+    from kite_env.analysis.turn_rate import tethered_wing_yaw_response
 
     base = Config()
     base = dataclasses.replace(base, structure=dataclasses.replace(base.structure, rayleigh_beta_s=6.4e-4))
@@ -1008,15 +1008,15 @@ def test_the_wing_on_its_lines_carries_the_yaw_twist_mode():
 
 
 def test_the_linearised_rig_predicts_the_growth_of_its_yaw_mode():
-    """kite_env.turn_rate.tethered_wing_modes: the rig at rest on its lines, linearised with the damping taken by
-    central differences of the step's own force law (the section loads see the wing's rigid translation through the
+    """kite_env.analysis.turn_rate.tethered_wing_modes: the rig at rest on its lines, linearised with the damping taken
+    by central differences of the step's own force law (the section loads see the wing's rigid translation through the
     inflow), predicts the stepped rig's yaw mode: 3.63 Hz at -2.32 % of critical, the rig kicked with 0.05 rad/s
     growing at -1.23 % (3.67 Hz). With the Newton tangent's damping (the section damping on all of the velocity) the
     same mode is at 2.94 Hz and 15.7 %: what a linearisation with that damping misses (docs/steering.md, "The yaw
     rig"). At a structural damping of ``rayleigh_beta_s`` 6.4e-4 s, where the mode grows slowly enough for the rig's
     3 s record to measure its rate (docs/model.md, "Structural damping"). (With the former co-rotational hem the
     linearisation and the rig agreed within 0.2 % of critical, with either added-mass force.)"""
-    from kite_env.turn_rate import tethered_wing_modes, tethered_wing_yaw_response
+    from kite_env.analysis.turn_rate import tethered_wing_modes, tethered_wing_yaw_response
 
     base = Config()
     cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, rayleigh_beta_s=6.4e-4))
