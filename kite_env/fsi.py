@@ -387,7 +387,7 @@ class AeroelasticWing:
         """The dynamic-pressure ramp of a cold solve: from the unloaded wing to the load scale ``last`` in increments
         of ``h0`` (``1 / fsi.cold_load_steps``) by :meth:`continuation`. From the unloaded wing, whose canopy is
         slack and whose tangent is nearly singular, the fixed first sixth of the load was too far for Newton in 20 %
-        of the randomized starts of ``scripts/end_reasons.py`` (docs/model.md, "The conservative tube law")."""
+        of the randomized starts of ``kite-eval end-reasons`` (docs/model.md, "The conservative tube law")."""
         return self.continuation(state, 0.0, last, h0,
                                  lambda st, scale: step(st, q_b, flight, dt, support, scale, history)[0], history)
 
@@ -907,7 +907,7 @@ class _AeroLoad:
         # baseline); a cold static solve keeps the secant stiffness alone, Kachanov's secant iteration, which
         # converges from far for a monotone law (Kachanov, J. Appl. Math. Mech. 23, 880, 1959; Fucik, Kratochvil &
         # Necas, Comment. Math. Univ. Carolinae 14, 651, 1973): with the exact, nearly singular tangent of saturating
-        # tubes a randomized start at 9 m/s (seed 100 of scripts/end_reasons.py) failed that converges with the
+        # tubes a randomized start at 9 m/s (seed 100 of kite-eval end-reasons) failed that converges with the
         # secant
         self.collapsed = self.wing.update_tube_stiffness(state, material_tangent=bool(self.dt)
                                                          or self.wing._exact_tube_tangent)

@@ -178,7 +178,7 @@ def test_non_convergence_raises_with_history():
 
 def test_a_cold_start_halves_a_load_increment_that_is_too_far():
     """Automatic load incrementation of a cold solve (``AeroelasticWing._cold_ramp``). At this start (the first draw
-    of seed 107 of ``scripts/end_reasons.py``: 34.7 m/s along the path, 9 deg sideways in K) the first sixth of the
+    of seed 107 of ``kite-eval end-reasons``: 34.7 m/s along the path, 9 deg sideways in K) the first sixth of the
     dynamic pressure is too far for Newton from the unloaded wing, whose slack canopy has a nearly singular
     tangent; the start failed, and the env drew another one. The increment is halved until it converges and grows
     back, and the wing reaches the equilibrium of a four times finer ramp."""
