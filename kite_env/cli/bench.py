@@ -32,6 +32,7 @@ import argparse
 import sys
 
 from kite_env.benchmark import bench_batched, bench_env
+from kite_env.cli import parse_or_status
 from kite_env.config import ConfigError
 
 
@@ -88,14 +89,6 @@ def main(argv=None) -> int:
     return 0
 
 
-def _parse(p: argparse.ArgumentParser, argv):
-    """``p.parse_args(argv)``, or the exit status of ``--help`` (0) or of a parse error (2, message printed)."""
-    try:
-        return p.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-
-
 def wing(argv) -> int:
     """``kite-bench wing``: the static aeroelastic wing on one core (module docstring)."""
     from kite_env.benchmark import WING_RESOLUTIONS
@@ -109,7 +102,7 @@ def wing(argv) -> int:
     p.add_argument("--steps", type=int, default=100, help="warm steps per resolution (default 100)")
     p.add_argument("--resolutions", default=default,
                    help=f"comma-separated SECTIONSxCHORD list (default {default}); the table's summary row is 37x6")
-    args = _parse(p, argv)
+    args = parse_or_status(p, argv)
     if isinstance(args, int):
         return args
     try:
@@ -159,7 +152,7 @@ def soak(argv) -> int:
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--out", required=True)
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
-    args = _parse(p, argv)
+    args = parse_or_status(p, argv)
     if isinstance(args, int):
         return args
     if args.merge:
@@ -174,14 +167,21 @@ def soak(argv) -> int:
     if args.episodes < 1 or args.jobs < 1 or args.duration <= 0:
         return fail("--episodes and --jobs must be >= 1 and --duration > 0")
     from kite_env.config import load_config
-    from kite_env.soak import soak as fly_soak, soak_table, write
+    from kite_env.soak import soak as fly_soak
 
     try:
         load_config(None, args.set)
     except ConfigError as exc:
         return fail(str(exc))
-    result = fly_soak(args.fidelity, args.episodes, args.seed, args.duration, args.jobs, args.set)
-    write(result, args.out)
+    return _report(fly_soak(args.fidelity, args.episodes, args.seed, args.duration, args.jobs, args.set), args.out)
+
+
+def _report(result: dict, out) -> int:
+    """Write a soak's result to ``out``, print its table and the first exceptions; exit status 0 when no step was
+    non-finite and nothing raised, else 1."""
+    from kite_env.soak import soak_table, write
+
+    write(result, out)
     print(soak_table(result), end="")
     for row in result["exceptions"][:5]:
         print(f"seed {row['seed']}: {row['exception']}", file=sys.stderr)
@@ -192,7 +192,7 @@ def _merge(dirs, out) -> int:
     import json
     from pathlib import Path
 
-    from kite_env.soak import merge, soak_table, write
+    from kite_env.soak import merge
 
     parts = []
     for d in dirs:
@@ -206,9 +206,7 @@ def _merge(dirs, out) -> int:
     except ValueError as exc:
         print(f"kite-bench soak: error: {exc}", file=sys.stderr)
         return 2
-    write(result, out)
-    print(soak_table(result), end="")
-    return 0 if not result["exceptions"] and not result["non_finite_steps"] else 1
+    return _report(result, out)
 
 
 #: the command's own names, and the benchmarks it hands on (kite_env.benchmark)

@@ -78,6 +78,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kite_env.cli import parse_or_status
 from kite_env.config import FIDELITIES
 from kite_env.evaluation import evaluate_episode, write_rows
 
@@ -353,10 +354,9 @@ def main(argv=None) -> int:
         return end_reasons(argv[1:])
     if argv[:1] == ["benchmark"]:
         return benchmark(argv[1:])
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
-        return int(exc.code or 0)
+    args = parse_or_status(build_parser(), argv)
+    if isinstance(args, int):
+        return args
     overrides = list(args.overrides)
     if args.duration is not None:
         if not (math.isfinite(args.duration) and args.duration > 0):
@@ -505,11 +505,9 @@ def end_reasons(argv) -> int:
     """``kite-eval end-reasons`` (module docstring): exit status 0, 3 with a numerical failure, 1 when a start did not
     converge, 2 for bad input; nothing written but with 0 or 3."""
     prog = f"{PROG} end-reasons"
-    p = build_end_reasons_parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    args = parse_or_status(build_end_reasons_parser(), argv)
+    if isinstance(args, int):
+        return args
     if args.episodes < 1 or args.jobs < 1 or not (math.isfinite(args.duration) and args.duration > 0):
         return _fail("--episodes and --jobs must be >= 1 and --duration > 0", prog)
     if args.config is not None and not Path(args.config).is_file():
@@ -563,11 +561,9 @@ def benchmark(argv) -> int:
     from kite_env.evaluation import benchmark_row, benchmark_table, recipe_env
 
     prog = f"{PROG} benchmark"
-    p = build_benchmark_parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    args = parse_or_status(build_benchmark_parser(), argv)
+    if isinstance(args, int):
+        return args
     from kite_env.policies import SHIPPED, shipped_model
     from kite_env.training import UsageError
 

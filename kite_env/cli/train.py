@@ -59,6 +59,7 @@ from pathlib import Path
 
 import yaml
 
+from kite_env.cli import parse_or_status
 from kite_env.config import FIDELITIES, ConfigError, fingerprint
 from kite_env.envs import ENV_ID, FAST_ENV_ID
 from kite_env.training import (
@@ -347,11 +348,9 @@ def build_select_parser() -> argparse.ArgumentParser:
 
 def select(argv) -> int:
     """``kite-train select``: exit status 0, or 2 for bad input (nothing flown or written)."""
-    p = build_select_parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
-        return int(exc.code or 0)
+    args = parse_or_status(build_select_parser(), argv)
+    if isinstance(args, int):
+        return args
     if args.ship is not None and args.ship.exists() and not args.force:
         print(f"kite-train select: error: '{args.ship}' exists (use --force to replace it)", file=sys.stderr)
         return 2
@@ -384,10 +383,9 @@ def curves(argv) -> int:
                                 "checkpoints' validation returns (kite-train select).")
     p.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR", help="kite-train run folders")
     p.add_argument("--out", required=True, type=Path, help="folder for learning_curves.png")
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a parse error (2, message already printed)
-        return int(exc.code or 0)
+    args = parse_or_status(p, argv)
+    if isinstance(args, int):
+        return args
     from kite_env.training import plot_learning_curves
 
     png = args.out / "learning_curves.png"
