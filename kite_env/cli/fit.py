@@ -1,6 +1,7 @@
 """``kite-fit``: make the fast fidelity's reduced-order wing for a model.
 
-    kite-fit sample --out DIR [--episodes N] [--seed S] [--jobs J] [--config FILE] [--set SECTION.KEY=VALUE ...]
+    kite-fit sample --out DIR [--episodes N] [--seed S] [--jobs J] [--starts | --agent POLICY] [--config FILE]
+                    [--set SECTION.KEY=VALUE ...]
     kite-fit fit --tapes DIR --out FILE.npz [--hidden 128,128] [--epochs 150] [--seed 0] [--config FILE] [--set ...]
     kite-fit agreement --out DIR [--surrogate FILE.npz] [--episodes 50] [--jobs J] [--quick]
     kite-fit start-table --out FILE_start.npz [--s-grid 16:58:3] [--w-grid -11:-2:1] [--config FILE] [--set ...]
@@ -29,11 +30,11 @@ from pathlib import Path
 
 
 def _sample_worker(args):
-    out, n, seed, overrides, start, step, starts = args
+    out, n, seed, overrides, start, step, starts, agent = args
     from kite_env.fitting.trajectories import sample_flights
 
     sample_flights(out, n, seed, overrides, start=start, step=step, log=lambda s: print(s, flush=True),
-                   starts=starts)
+                   starts=starts, agent=agent)
     return 0
 
 
@@ -167,6 +168,9 @@ def main(argv=None) -> int:
     s.add_argument("--jobs", type=int, default=1)
     s.add_argument("--starts", action="store_true", help="short episodes of starts (kite_env.fitting.trajectories."
                    "start_plan) instead of the flights of the sampling plan")
+    s.add_argument("--agent", default=None, metavar="POLICY", help="flights of a trained agent (a shipped name or a "
+                   "model.zip), alone and with held offsets (kite_env.fitting.trajectories.agent_plan), instead of "
+                   "the flights of the sampling plan")
     s.add_argument("--config", default=None, help="physics config (YAML); default: the flying model")
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     f = sub.add_parser("fit", help="fit the reduced-order wing to the tapes")
@@ -216,13 +220,28 @@ def main(argv=None) -> int:
     if args.episodes < 1 or args.jobs < 1:
         print("kite-fit: error: --episodes and --jobs must be at least 1", file=sys.stderr)
         return 2
+    if args.agent is not None:
+        if args.starts:
+            print("kite-fit: error: --starts and --agent are two plans; give one", file=sys.stderr)
+            return 2
+        from kite_env.envs.figure_eight import KiteFigureEightEnv
+        from kite_env.policies import PolicyError, make_agent
+
+        env = KiteFigureEightEnv(overrides=over)
+        try:  # the agent exists and was trained on this model (else one line, nothing flown)
+            make_agent(args.agent, env)
+        except PolicyError as exc:
+            print(f"kite-fit: error: {exc}", file=sys.stderr)
+            return 2
+        finally:
+            env.close()
     try:
         if args.jobs == 1:
-            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1, args.starts))
+            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1, args.starts, args.agent))
         else:
             with mp.get_context("spawn").Pool(args.jobs) as pool:
-                pool.map(_sample_worker, [(args.out, args.episodes, args.seed, over, j, args.jobs, args.starts)
-                                          for j in range(args.jobs)])
+                pool.map(_sample_worker, [(args.out, args.episodes, args.seed, over, j, args.jobs, args.starts,
+                                           args.agent) for j in range(args.jobs)])
     except KeyboardInterrupt:
         print("kite-fit: interrupted; run the same command again to go on", file=sys.stderr)
         return 130

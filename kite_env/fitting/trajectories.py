@@ -142,7 +142,7 @@ class EpisodePlan:
     """One sampled flight: the policy, its conditions and its seed."""
 
     index: int
-    policy: str  # baseline | random | constant:<a> | held:<amp> | baseline+held:<amp>
+    policy: str  # baseline | random | constant:<a> | held:<amp> | <policy>+held:<amp> | an agent
     wind_mps: float
     turbulence_max: float
     gust_mps: float
@@ -205,13 +205,40 @@ def start_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
     return plan
 
 
+#: index of the first flight of a trained agent (:func:`agent_plan`): apart from those of the other plans
+AGENT_INDEX = 20_000
+
+
+def agent_plan(n: int, seed: int, agent: str, winds=(4.0, 10.0)) -> list[EpisodePlan]:
+    """``n`` flights of a trained ``agent`` (a shipped name or a ``model.zip``), indexed from :data:`AGENT_INDEX`:
+    the agent alone (60 s) and the agent with held offsets of up to 0.1-0.4 (40 s) in turn, in the conditions of
+    :func:`sampling_plan`. An agent trained in the fast fidelity steers the kite through states that the paper's
+    controller and the random inputs of :func:`sampling_plan` do not reach; a wing fitted without them answers its
+    steering as it never learnt to (docs/fast_fidelity.md), so its flights belong in the samples (the data-aggregation
+    idea of Ross, Gordon & Bagnell, "A reduction of imitation learning and structured prediction to no-regret online
+    learning", AISTATS 2011, applied to the model the agent trains in)."""
+    rng = np.random.default_rng(seed)
+    plan = []
+    for i in range(n):
+        if i % 2 == 0:
+            pol, dur = agent, 60.0
+        else:
+            pol, dur = f"{agent}+held:{rng.uniform(0.1, 0.4):.3f}", 40.0
+        gust = float(rng.uniform(2.0, 6.0)) if rng.uniform() < 0.25 else 0.0
+        plan.append(EpisodePlan(AGENT_INDEX + i, pol, round(float(rng.uniform(*winds)), 3), 0.1, round(gust, 3),
+                                round(float(rng.uniform(3.0, 0.6 * dur)), 2), dur, int(rng.integers(2**31 - 1))))
+    return plan
+
+
 def make_sampling_policy(spec: str, env, seed: int):
-    """The policy of an :class:`EpisodePlan` for ``env``."""
+    """The policy of an :class:`EpisodePlan` for ``env``: a policy of :func:`kite_env.policies.make_agent`,
+    ``held:<amp>`` or ``<policy>+held:<amp>``."""
     from kite_env.policies import make_agent
 
     rng = np.random.default_rng(seed)
-    if spec.startswith("baseline+held:"):
-        return HeldNoise(make_agent("baseline", env), float(spec.split(":")[1]), (0.2, 1.5), env.control_dt, rng)
+    if "+held:" in spec:
+        base, amp = spec.rsplit("+held:", 1)
+        return HeldNoise(make_agent(base, env, seed=seed), float(amp), (0.2, 1.5), env.control_dt, rng)
     if spec.startswith("held:"):
         return HeldNoise(None, float(spec.split(":")[1]), (0.1, 1.0), env.control_dt, rng)
     return make_agent(spec, env, seed=seed)
@@ -250,14 +277,19 @@ def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = Non
 
 
 def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), start: int = 0, step: int = 1,
-                   log=print, starts: bool = False) -> list[Path]:
+                   log=print, starts: bool = False, agent: str | None = None) -> list[Path]:
     """Fly the episodes ``start, start + step, ...`` of ``sampling_plan(n, seed)`` (``starts``: of
-    :func:`start_plan`) into ``out_dir/ep_XXXX.npz``, skipping those already there (an interrupted run goes on where it
-    stopped; several processes share a plan with distinct ``start`` and the same ``step``)."""
+    :func:`start_plan`; ``agent``: of :func:`agent_plan`) into ``out_dir/ep_XXXX.npz``, skipping those already there
+    (an interrupted run goes on where it stopped; several processes share a plan with distinct ``start`` and the same
+    ``step``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for plan in (start_plan if starts else sampling_plan)(n, seed)[start::step]:
+    if agent is not None:
+        plans = agent_plan(n, seed, agent)
+    else:
+        plans = (start_plan if starts else sampling_plan)(n, seed)
+    for plan in plans[start::step]:
         path = out / f"ep_{plan.index:04d}.npz"
         paths.append(path)
         if path.is_file():
@@ -270,6 +302,5 @@ def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), st
     return paths
 
 
-__all__ = ["COLUMNS", "START_INDEX", "EpisodePlan", "FlightTape", "HeldNoise", "fly_plan", "load_tape",
-           "make_sampling_policy", "sample_flights", "sampling_plan", "save_tape", "start_plan"]
-
+__all__ = ["AGENT_INDEX", "COLUMNS", "START_INDEX", "EpisodePlan", "FlightTape", "HeldNoise", "agent_plan", "fly_plan",
+           "load_tape", "make_sampling_policy", "sample_flights", "sampling_plan", "save_tape", "start_plan"]
