@@ -365,3 +365,37 @@ def test_fit_mlp_fits_a_smooth_map_on_top_of_the_known_linear_part():
     # the MLP alone is the map less the linear part
     mlp = dataclasses.replace(wing, K_b=np.zeros((12, 12))).predict(X[val])
     assert np.sqrt(np.mean((mlp[:, :12] - smooth[val, :12]) ** 2)) == pytest.approx(err["force_rms_N"], rel=1e-6)
+
+
+def test_the_agent_plan_flies_a_trained_agent_alone_and_with_held_offsets():
+    """agent_plan: indexed apart from the other plans, the agent alone (60 s) and with held offsets of 0.1-0.4 (40 s)
+    in turn, winds of the sampling plan, the same plan for the same seed; make_sampling_policy gives the agent with a
+    held offset its own action plus at most the offset, held between 0.2 and 1.5 s."""
+    import gymnasium as gym
+
+    from kite_env.fitting.trajectories import AGENT_INDEX, HeldNoise, agent_plan, make_sampling_policy, sampling_plan
+
+    plan = agent_plan(8, 3, "ppo")
+    assert plan == agent_plan(8, 3, "ppo") and plan != agent_plan(8, 4, "ppo")
+    assert [p.index for p in plan] == list(range(AGENT_INDEX, AGENT_INDEX + 8))
+    assert not {p.index for p in plan} & {p.index for p in sampling_plan(200, 3)}
+    assert [p.policy for p in plan[::2]] == ["ppo"] * 4 and all(p.duration_s == 60.0 for p in plan[::2])
+    for p in plan[1::2]:
+        base, amp = p.policy.split("+held:")
+        assert base == "ppo" and 0.1 <= float(amp) <= 0.4 and p.duration_s == 40.0
+    assert all(4.0 <= p.wind_mps <= 10.0 and p.turbulence_max == 0.1 for p in plan)
+
+    env = gym.make("KiteFigureEightFast-v1").unwrapped
+    obs, _ = env.reset(seed=0)
+    held = make_sampling_policy("ppo+held:0.3", env, seed=5)
+    assert isinstance(held, HeldNoise) and held.amp == 0.3
+    offsets = []
+    for k in range(200):
+        a_agent = float(held.base.predict(obs, None, np.array([k == 0]), True)[0].ravel()[0])
+        a = float(held.predict(obs, None, np.array([k == 0]), True)[0].ravel()[0])
+        offsets.append(a - a_agent)
+    offsets = np.round(offsets, 6)
+    assert np.abs(offsets).max() <= 0.3 + 1e-6 and len(set(offsets)) > 1
+    runs = np.diff(np.flatnonzero(np.diff(offsets) != 0))  # steps an offset is held (between its changes)
+    assert runs.min() >= round(0.2 / env.control_dt) - 1 and runs.max() <= round(1.5 / env.control_dt) + 1
+    env.close()
