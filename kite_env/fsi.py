@@ -45,9 +45,9 @@ from kite_env.structure import rotations, tube
 from kite_env.structure.assembly import Assembler
 from kite_env.structure.beam import BeamSet
 from kite_env.structure.hem import HemSet
-from kite_env.structure.kernels import tube_secants
 from kite_env.structure.shell import ShellSet
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver
+from kite_env.structure.tube_kernels import tube_secants
 
 #: Poisson ratio used to derive the shear modulus of the solid tip rod and TE wire (G = E / (2 (1 + nu))).
 _NU_ROD = 0.3

@@ -53,17 +53,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-try:  # numba is a declared dependency; without it the NumPy path is used
-    from numba import njit
-
-    NUMBA_AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only in environments without numba
-    NUMBA_AVAILABLE = False
-
-    def njit(*_args, **_kwargs):
-        """Identity decorator used when numba is missing."""
-        return lambda fun: fun
-
+from kite_env.compiled import BACKENDS, NUMBA_AVAILABLE, njit  # without numba the NumPy path is used
 
 PROFILES = ("uniform", "log", "power")
 K1_MIN = 0.02  # lowest longitudinal wavenumber of the turbulence modes, times L [-]
@@ -71,7 +61,6 @@ K1_MAX = 500.0  # highest longitudinal wavenumber of the turbulence modes, times
 VK_A = 1.339  # von Kármán spectral constant (MIL-F-8785C form) [-]
 _TWO_PI = 2.0 * math.pi
 _INV_TWO_PI = 1.0 / _TWO_PI
-BACKENDS = ("auto", "numba", "numpy")
 # Taylor coefficients (-1)^k / (2k)! of cos, k = 0..13: |error| < 2e-15 on [-pi, pi]. A literal tuple, not a
 # computed array: numba's cache is keyed on this file only.
 _COS_TAYLOR = (

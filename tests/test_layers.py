@@ -1,7 +1,7 @@
 """The package's layers: the library (``kite_env``) never imports the top-level ``agents`` package (its recipes and
 shipped models are data, found by path), and ``agents.baseline`` / ``agents.policies`` hand on the library's own
 policies to users' imports; the analyses (``kite_env.analysis``) are imported by nothing else of the library; the wing
-(``kite_env.fsi.AeroelasticWing``) is used through its public interface."""
+(``kite_env.fsi.AeroelasticWing``) is used through its public interface; ``kite_env.compiled`` alone imports numba."""
 
 from __future__ import annotations
 
@@ -48,6 +48,14 @@ def test_only_the_analyses_import_the_analysis_package():
                                                             or m.startswith("kite_env.analysis."))
                  for p in sorted(LIBRARY.rglob("*.py")) if analysis not in p.parents}
     assert {p: m for p, m in offenders.items() if m} == {}
+
+
+def test_only_the_compiled_module_imports_numba():
+    """kite_env.compiled is the one place that imports numba (``njit`` with its fallback, the backend choice, the
+    shared options); every compiled kernel takes them from there."""
+    importers = sorted(str(p.relative_to(LIBRARY.parent)) for p in LIBRARY.rglob("*.py")
+                       if any(m == "numba" or m.startswith("numba.") for m in _imported_modules(p)))
+    assert importers == ["kite_env/compiled.py"]
 
 
 def test_agents_modules_re_export_the_library_policies():

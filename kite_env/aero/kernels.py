@@ -29,14 +29,14 @@ frames, the 3/4-chord weights, the force) took about 64 us at every Newton itera
 step (docs/performance.md, "Theodorsen's force compiled").
 
 Backend selection is done by :func:`kite_env.aero.loads.section_loads` (``backend="auto" | "numba" | "numpy"``,
-resolved by :func:`kite_env.structure.kernels.resolve_backend`: environment variable ``KITE_ENV_ELEMENT_BACKEND``,
+resolved by :func:`kite_env.compiled.resolve_backend`: environment variable ``KITE_ENV_ELEMENT_BACKEND``,
 else numba when importable). Without numba the kernel below runs as plain Python (correct, very slow).
 
 Differences from the reference outside round-off: none for valid sections. A degenerate section (LE and TE node
 coincident, or a spanwise direction parallel to the chord) makes NumPy return ``nan``/``inf`` with a warning,
 whereas the compiled kernel (numba's default Python error model) raises ``ZeroDivisionError``.
 
-Implementation rules (as :mod:`kite_env.structure.kernels`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
+Implementation rules (as :mod:`kite_env.compiled`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
 no array views inside the section loop and only scalars passed to helpers (views cost reference-count updates);
 outputs written into arrays supplied by the caller. The thresholds and Breukels' constants are literals, not
 imports, because numba's cache is keyed on this file only: the test checks they equal the reference values.
@@ -49,12 +49,12 @@ import math
 import numpy as np
 
 from kite_env.aero.sections import SectionGeometry
-from kite_env.structure.kernels import njit
+from kite_env.compiled import JIT, njit
 
-# numba's NumPy error model, as the structure's and the dynamics' kernels: a section of zero chord (its nodes
-# collapsed in a Newton iterate) gives non-finite loads as the NumPy reference does, which the solver reports as a
-# non-finite residual (a failed step, made again in halves), instead of raising ZeroDivisionError out of the flight
-_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
+# JIT (kite_env.compiled) has numba's NumPy error model, as for the structure's and the dynamics' kernels: a section of
+# zero chord (its nodes collapsed in a Newton iterate) gives non-finite loads as the NumPy reference does, which the
+# solver reports as a non-finite residual (a failed step, made again in halves), instead of raising ZeroDivisionError
+# out of the flight
 
 # Thresholds of the reference implementation (literals: see the module docstring; checked by the tests).
 _FLAT_FRACTION = 0.02  # sections._FLAT_FRACTION: e_y blends to the LE tangent below this mean offset / chord
@@ -108,7 +108,7 @@ COEF = np.array(
 )
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25, neg=1):
     """``breukels.lei_coefficients`` of one section: (CL, CD, CM) for alpha [rad], t, kappa, x_ref / c, the
     point cm_ref / c the regression CM is taken about and ``neg`` (1: ``negative_alpha="bounded"``, 0: "breukels")."""
@@ -155,7 +155,7 @@ def _lei_coefficients(alpha, t, kappa, x_ref, cm_ref=0.25, neg=1):
     return cl, cd, cm
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _section_axes(x, i, n, m, flip, span, has_span):
     """Section ``i``'s frame as ``section_geometry`` builds it: ``(r0, r1, r2, chord_nodes, e_x, e_y, e_z)`` (the LE
     node, the LE-TE node distance [m] and the axes' nine components, flattened), from the section nodes ``x`` (n, m,
@@ -211,7 +211,7 @@ def _section_axes(x, i, n, m, flip, span, has_span):
     return r0, r1, r2, chord_nodes, ex0, ex1, ex2, ey0, ey1, ey2, ez0, ez1, ez2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, v_wind, rho, x_ref, c_pow, span,
                          has_span, scal, vec, node, zeta, axes, luff=0.0, cm_ref=0.25, rot_x=-1.0, neg=1):
     """Section loads of all sections (Eq. 2-9) written into the output arrays.
@@ -379,7 +379,7 @@ def section_loads_kernel(x, x_prev, has_prev, dt, tube_d, width, v_kite, omega, 
             node[0, i, j, 2] = fs * ex2 + fz * ez2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def section_normal_rate_kernel(x, v, n_start, m_a, dt, tube_d, v_wind, span, has_span, out):
     """Theodorsen's normal-rate load of every section on its nodes, written into ``out`` (n_sec, m, 3) [N]: the
     force ``F = -m_a (n' . v_rel) n`` with the section normal ``n`` (``section_geometry``'s ``e_z``) at ``x``, its rate

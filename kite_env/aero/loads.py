@@ -51,7 +51,7 @@ import numpy as np
 from kite_env.aero.breukels import CM_REGRESSION_REF_DEFAULT, X_REF_OVER_C_DEFAULT, lei_coefficients
 from kite_env.aero.kernels import section_loads_fields
 from kite_env.aero.sections import SectionGeometry, apparent_wind, cross, inflow, section_geometry, spanwise_directions
-from kite_env.structure.kernels import resolve_backend
+from kite_env.compiled import resolve_backend
 
 
 @dataclass(frozen=True)
@@ -216,7 +216,7 @@ def section_loads(
         Spanwise LE-line directions (see :func:`kite_env.aero.sections.section_geometry`); default from ``x_sec``.
     backend : {"auto", "numba", "numpy"}
         ``"numpy"``: the reference code below; ``"numba"``: the compiled kernel of :mod:`kite_env.aero.kernels`
-        (same results to round-off); ``"auto"``: see :func:`kite_env.structure.kernels.resolve_backend`.
+        (same results to round-off); ``"auto"``: see :func:`kite_env.compiled.resolve_backend`.
     moment_chord_power : float
         Power of the chord in Eq. (9), ``M = 1/2 rho CM c^p w V^2``: 2 (default) is the dimensionally consistent
         moment; 1 is the formula as printed in the paper (a moment per 1 m of reference length), kept for

@@ -27,15 +27,13 @@ import math
 
 import numpy as np
 
+from kite_env.compiled import JIT, njit
 from kite_env.dynamics.kernels import _WORK, particle_accelerations_into, project_constraints, reel_out_speed
 from kite_env.dynamics.particles import ParticleState, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator, SimulationError, StepRecord
 from kite_env.fsi import WingSolution, nominal_wing
-from kite_env.structure.kernels import njit
 from kite_env.surrogate.model import filter_gain
 from kite_env.wind import _turbulence_kernel
-
-_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 #: kite status after a step
 OK, NON_FINITE, OUTSIDE = 0, 1, 2
@@ -44,7 +42,7 @@ _TWO_PI = 2.0 * math.pi
 
 
 # ---------------------------------------------------------------------------------------------------- kernels
-@njit(**_JIT)
+@njit(**JIT)
 def _wind_parts(t, pos, out, turb, hold, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T,
                 turbulent, wavevec_t, phase0, omega, amp, n_modes, t_buf):
     """Wind ``out`` (P, 3) at ``pos`` (P, 3) for one kite: the turbulent part ``turb`` (P, 3), evaluated here at
@@ -79,7 +77,7 @@ def _wind_parts(t, pos, out, turb, hold, speed, profile, z_ref, z0, log_den, she
         out[i, 2] = turb[i, 2]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _wind_at(t, pos, out, speed, profile, z_ref, z0, log_den, shear, gust_G, gust_t0, gust_T, turbulent,
              wavevec_t, phase0, omega, amp, n_modes, t_buf):
     """Wind (P, 3) at ``pos`` (P, 3) for one kite: :meth:`kite_env.wind.WindField.velocity` (numba backend)."""
@@ -88,7 +86,7 @@ def _wind_at(t, pos, out, speed, profile, z_ref, z0, log_den, shear, gust_G, gus
                 turbulent, wavevec_t, phase0, omega, amp, n_modes, t_buf)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def kite_inputs(t, rk, vk, q_design, wf, wi, wavevec_t, phase0, omega_m, amp, n_modes, x, wind5, R, pos, w6,
                 t_buf, turb6, hold):
     """Wing inputs ``x`` (30,) of one kite (:data:`kite_env.surrogate.samples.INPUT_NAMES`), the wind ``wind5`` (5, 3)
@@ -211,7 +209,7 @@ _TANH_Q = (1.0, 67.15501736545255, 527.7009840099352, 840.6143015971842, -241.39
            -227.91246578802185, 438.6164396440909, 103.77524164025381)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def tanh_inplace(h):
     """``h <- tanh(h)`` elementwise (rational approximation above; NaN stays NaN)."""
     P0, P1, P2, P3, P4, P5, P6, P7 = _TANH_P
@@ -228,7 +226,7 @@ def tanh_inplace(h):
         h[j] = x * p / q
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
     """``y = tanh(tanh(x W0 + b0) W1 + b1) W2 + b2`` for one row ``x`` (n_in,) float64 -> ``y`` (17,) float64, in
     float32 (the weights are stored and trained in float32; the normalisations are folded into the first and last
@@ -259,7 +257,7 @@ def mlp_row(x, W0, b0, W1, b1, W2, b2, h0, h1, h2, y):
         y[j] = h2[j]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def add_stiffness(x, K, y):
     """``y[:12] += K x[:12]``: the known linear part of the bridle force (:attr:`SurrogateWing.K_b`)."""
     for i in range(12):
@@ -269,7 +267,7 @@ def add_stiffness(x, K, y):
         y[i] += acc
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def history_inputs(x, z, sel):
     """The latent state's inputs of the reduced-order wing (:mod:`kite_env.fitting.fit`): ``x[30 + j n + i] =
     z[j, i] - x[sel[i]]`` for the filters ``z`` (n_tau, n) of the inputs ``sel`` (n,); nothing without filters."""
@@ -279,7 +277,7 @@ def history_inputs(x, z, sel):
             x[30 + j * n + i] = z[j, i] - x[sel[i]]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def latent_update(x, z, sel, gain, reset):
     """One physics step of the latent low-pass filters: ``z <- z + c (x[sel] - z)`` with ``c = gain[j]`` (the exact
     discrete first-order filter, :func:`kite_env.surrogate.model.filter_gain`), or ``z <- x[sel]`` (``reset``: a
@@ -292,7 +290,7 @@ def latent_update(x, z, sel, gain, reset):
                 z[j, i] += gain[j] * (x[sel[i]] - z[j, i])
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp, n_modes, W0, b0, W1, b1,
                    W2, b2, k_c, c_c, lo, hi, active, X, Y, wind, turb, R, tension, length, status, Z, sel, gain, K_b):
     """Inputs ``X`` (n, n_in), wing outputs ``Y`` (n, 17), wind at the masses (n, 5, 3), its turbulent part at the
@@ -323,7 +321,7 @@ def evaluate_kites(t, r, v, rest, q_design, wind_f, wind_i, wavevec_t, phase0, o
         status[k] = _status(finite, X[k], Y[k], lo, hi)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _status(finite, x, y, lo, hi):
     if not finite:
         return NON_FINITE
@@ -336,7 +334,7 @@ def _status(finite, x, y, lo, hi):
     return OK
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _line_state_one(rk, vk, rest, k_c, c_c, T_out, l_out):
     for i in range(4):
         d0 = rk[i, 0] - rk[4, 0]
@@ -349,7 +347,7 @@ def _line_state_one(rk, vk, rest, k_c, c_c, T_out, l_out):
         l_out[i] = li
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho, line_cd, line_diameter,
                    tether_diameter, tether_length, reel_speed, tip_lengths, pair_damping, gravity, alpha, a, lam,
                    work):
@@ -364,7 +362,7 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
                                 gravity, alpha, zero_K, False, a, lam, work)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
                tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether,

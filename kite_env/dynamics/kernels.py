@@ -18,11 +18,11 @@ numba's dispatch of its 22 arguments, ~2 us the wind model, the rest Python. The
 this file compiles (~5 s); later processes load the cache from ``__pycache__``.
 
 Backend selection is done by :class:`kite_env.dynamics.simulator.FlightSimulator` (``backend="auto" | "numba" |
-"numpy"``, resolved by :func:`kite_env.structure.kernels.resolve_backend`: environment variable
+"numpy"``, resolved by :func:`kite_env.compiled.resolve_backend`: environment variable
 ``KITE_ENV_ELEMENT_BACKEND``, else numba when importable). Without numba the kernel below runs as plain Python
 (correct, slow).
 
-Implementation rules (as :mod:`kite_env.structure.kernels`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
+Implementation rules (as :mod:`kite_env.compiled`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
 scalar indexing only; no array views except the fixed slices of the caller's work array in
 :func:`particle_accelerations_into` (views allocate nothing; the intermediate arrays of the right-hand side were
 about a third of its cost). ``error_model="numpy"``: a division by zero (a degenerate geometry, a line of
@@ -36,12 +36,10 @@ import math
 
 import numpy as np
 
-from kite_env.structure.kernels import njit
-
-_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
+from kite_env.compiled import JIT, njit
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def reel_out_speed(tether_force, speed, dt, force_limit, damping, speed_max, time_constant):
     """The ground station's reel-out speed for the next step (``dynamics.winch = "force"``) from the last step's tether
     force and speed: the set speed ``clip((F_t - F_set) / c_w, 0, v_max)``, followed with the time constant ``tau``
@@ -54,7 +52,7 @@ def reel_out_speed(tether_force, speed, dt, force_limit, damping, speed_max, tim
 _A, _B, _C, _D, _KCU = 0, 1, 2, 3, 4
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho, line_cd,
                            line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths, pair_damping,
                            gravity, alpha, minv_K, wing_inertia):
@@ -73,7 +71,7 @@ def particle_accelerations(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b
 _WORK = 157
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K, K_b, m, rest, k_c, c_c, rho,
                                 line_cd, line_diameter, tether_diameter, tether_length, reel_speed, tip_lengths,
                                 pair_damping, gravity, alpha, minv_K, wing_inertia, a, lam, work):
@@ -320,7 +318,7 @@ def particle_accelerations_into(r, v, wind, F0_K, F1_K, frac, interpolate, q_b_K
         a[j, 2] += minv[j] * (-d2 * lc)
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _tip_constraint(r, v, a, i, j, L, alpha):
     """Tip-beam constraint ``g = 1/2 (|d|^2 - L^2)``, ``d = r_i - r_j``: ``d`` (three floats) and the right-hand side
     of ``G a_c = -dG/dt v - 2 alpha G v - alpha^2 g - G a`` for the constraint correction ``a_c`` of the
@@ -338,7 +336,7 @@ def _tip_constraint(r, v, a, i, j, L, alpha):
     return d0, d1, d2, -gdot_v - 2.0 * alpha * Gv - alpha * alpha * g - Ga
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _minv_W(R, minv_K, x, out):
     """``out = M^-1 x`` for a (4, 3)-shaped force ``x`` on A-D in W, with the mass matrix held in K:
     ``M_W^-1 = blkdiag(R) M_K^-1 blkdiag(R)^T``; ``out`` (12,) in W."""
@@ -357,7 +355,7 @@ def _minv_W(R, minv_K, x, out):
             out[3 * i + k] = R[k, 0] * t0 + R[k, 1] * t1 + R[k, 2] * t2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _wing_inertia_free(f, R, minv_K, gravity, a, fk, t):
     """Unconstrained accelerations of A-D with the wing's mass matrix: ``a = M^-1 f - g e_z`` (gravity on the whole
     wing mass; the condensed mass reproduces rigid translations exactly, so its generalized weight is ``M g``)."""
@@ -368,7 +366,7 @@ def _wing_inertia_free(f, R, minv_K, gravity, a, fk, t):
         a[i, 2] = t[3 * i + 2] - gravity
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, w, gd):
     """Multipliers of the two tip-beam constraints (A-B, C-D) with the non-diagonal wing mass: both share the wing's
     mass, so ``S = G M^-1 G^T`` is a full 2 x 2 matrix; ``a += M^-1 G^T lam``. ``w`` (2, 12) and ``gd`` (2, 4, 3)
@@ -405,7 +403,7 @@ def _wing_inertia_tips(r, v, R, minv_K, tip_lengths, alpha, a, lam, w, gd):
             a[i, k] += w[0, 3 * i + k] * l1 + w[1, 3 * i + k] * l2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _line_geometry(r, v, i, j):
     """Length ``l`` of the segment from mass ``j`` to mass ``i``, its unit vector ``e`` (three floats) and the rate
     of change of its length ``e · (v_i - v_j)``: ``(l, e0, e1, e2, ldot)``."""
@@ -418,7 +416,7 @@ def _line_geometry(r, v, i, j):
     return l, e0, e1, e2, ldot
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def pair_index(q):
     """Mass indices (i, j) of the damped pair ``q`` (particles.DAMPED_PAIRS: A-C, B-D, A-D, B-C)."""
     if q == 0:
@@ -430,7 +428,7 @@ def pair_index(q):
     return _B, _C
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _pair_difference(x, m, i, j):
     """Inverse masses ``1/m_i, 1/m_j`` and the difference ``x_i - x_j`` of a constraint pair (``j < 0``: the ground
     station at the origin, no mass)."""
@@ -439,7 +437,7 @@ def _pair_difference(x, m, i, j):
     return 1.0 / m[i], 1.0 / m[j], x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _pair_update(x, i, j, wi, wj, s, d0, d1, d2):
     """``x_i -= w_i s d``, ``x_j += w_j s d`` in place (the mass-weighted correction of one constraint)."""
     x[i, 0] -= wi * s * d0
@@ -451,7 +449,7 @@ def _pair_update(x, i, j, wi, wj, s, d0, d1, d2):
         x[j, 2] += wj * s * d2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
     """Mass-weighted projection of positions (``iters`` passes), then velocities, onto the tether and tip-beam
     distance constraints: :meth:`kite_env.dynamics.particles.ParticleSystem.project` in scalar loops.
@@ -483,7 +481,7 @@ def project_constraints(r, v, m, tether_length, tip_lengths, iters, reel_speed):
     return r, v
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
     """Line ``i`` from the KCU at ``r_k`` (velocity ``v_k``) to the wing end ``x_b[i]`` (velocity ``v_b[i]``):
     unit vector ``e0, e1, e2`` (KCU -> wing), length ``l``, the spring-damper force ``s`` of Eq. (10),
@@ -499,7 +497,7 @@ def _bridle_line(x_b, v_b, i, r_k, v_k, rest_i, k_c, c_c, eps2):
     return e0, e1, e2, l, s, root, T
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef):
     """Eq. (11)'s drag of a straight line of length ``l`` along ``e`` in the apparent wind ``va`` (the whole of it:
     :func:`kite_env.dynamics.lines.line_drag`, ``drag_coef = -1/2 rho C_D d``)."""
@@ -509,7 +507,7 @@ def _line_drag(va0, va1, va2, e0, e1, e2, l, drag_coef):
     return g * n0, g * n1, g * n2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out):
     """The bridle lines' pull on the KCU and its half of their drag (3,) [N] into ``out``: what
     :meth:`kite_env.dynamics.dynamic_simulator.DynamicFlightSimulator._kcu_acceleration` adds with NumPy, the
@@ -537,7 +535,7 @@ def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out
     out[2] = f2 + 0.5 * d2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def wing_bridle_lines(x_b, v_b, r_k, v_k, v_wind, rest, k_c, c_c, drag_coef, eps, e, l, T, dT, drag):
     """The bridle lines at the wing's ends A-D (:meth:`kite_env.dynamics.wing_dynamics._StepLoad._lines` and the
     drag that ``force`` adds, compiled: a Newton iterate's NumPy calls on four lines cost more than the arithmetic).

@@ -23,13 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kite_env.compiled import resolve_backend
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations, project_constraints, reel_out_speed
 from kite_env.dynamics.particles import DAMPED_PAIRS, A, B, C, D, ParticleState, ParticleSystem
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame, kite_frame_rates
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError, WingSolution, nominal_wing
-from kite_env.structure.kernels import resolve_backend
 from kite_env.structure.rotations import expm
 
 
@@ -96,7 +96,7 @@ class FlightSimulator:
         Right-hand side of the particle system (:meth:`_rhs`): ``"numpy"`` the reference
         (:class:`~kite_env.dynamics.particles.ParticleSystem`), ``"numba"`` the compiled kernel
         :func:`kite_env.dynamics.kernels.particle_accelerations` (same results to round-off); ``"auto"``: see
-        :func:`kite_env.structure.kernels.resolve_backend`.
+        :func:`kite_env.compiled.resolve_backend`.
     """
 
     #: the wing model flying: "fe" here, "surrogate" in the fast fidelity

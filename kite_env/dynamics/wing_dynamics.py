@@ -68,8 +68,9 @@ from kite_env.dynamics.wing_mass import nodal_rotary_inertia, nodal_wing_mass
 from kite_env.frames import cross
 from kite_env.fsi import AeroelasticWing, FlightState, WingConvergenceError
 from kite_env.geometry.mesh import BEAM_TIP
+from kite_env.structure.assembly_kernels import csc_gather_matvec
 from kite_env.structure.beam import BeamSet
-from kite_env.structure.kernels import csc_gather_matvec, relative_rotation_vectors
+from kite_env.structure.rotation_kernels import relative_rotation_vectors
 from kite_env.structure.rotations import expm, logm
 from kite_env.structure.shell_membrane import membrane_discrete_gradient, membrane_internal
 from kite_env.structure.solver import ConvergenceError, NodalState, StaticSolver

@@ -23,10 +23,8 @@ import math
 
 import numpy as np
 
-from kite_env.structure.kernels import njit
+from kite_env.compiled import JIT, njit
 from kite_env.trajectory import _HINT_WINDOW, Lemniscate
-
-_JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 #: observation terms in canonical order with their sizes (the env's ``_TERM_SPECS`` order)
 TERMS = (("position", 3), ("heading", 2), ("line_forces", 5), ("path", 5), ("rates", 4), ("actuator", 3))
@@ -54,7 +52,7 @@ def term_indices(layout) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------- kernels
-@njit(**_JIT)
+@njit(**JIT)
 def _curve_rows(s, a, b, rot, m, out):
     """``_curve_scalar(s, a, b, rot)``: rows p, dp/ds, d2p/ds2 (3, 3) in W into ``out``; ``m`` is scratch."""
     c2 = (a / b) ** 2
@@ -85,12 +83,12 @@ def _curve_rows(s, a, b, rot, m, out):
             out[i, j] = m[i, 0] * rot[j, 0] + m[i, 1] * rot[j, 1] + m[i, 2] * rot[j, 2]
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _row_dot(c, i, x0, x1, x2):
     return c[i, 0] * x0 + c[i, 1] * x1 + c[i, 2] * x2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _refine(R0, R1, R2, s0, f0, ds, a, b, rot, m, c):
     """``Lemniscate._refine``: maximise ``R . p(s)`` near the sample ``s0`` by safeguarded Newton on ``R . p' = 0``."""
     lo, hi = s0 - ds, s0 + ds
@@ -124,7 +122,7 @@ def _refine(R0, R1, R2, s0, f0, ds, a, b, rot, m, c):
     return s if _row_dot(c, 0, R0, R1, R2) >= f0 else s0
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def nearest_point(R0, R1, R2, s_hint, samples, s_samples, window, ds, a, b, rot, m, c):
     """:meth:`Lemniscate.nearest` of the direction ``(R0, R1, R2)`` (any length), ``s_hint`` NaN for none.
 
@@ -163,7 +161,7 @@ def nearest_point(R0, R1, R2, s_hint, samples, s_samples, window, ds, a, b, rot,
     return s % _TWO_PI, dist, p0, p1, p2, t0, t1, t2, l0, l1, l2
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _sphere_basis(r0, r1, r2):
     """:func:`kite_env.trajectory.sphere_basis` at ``r / |r|`` for one vector: ``x_s`` then ``y_s``."""
     n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
@@ -177,7 +175,7 @@ def _sphere_basis(r0, r1, r2):
     return xs0, xs1, xs2, r1 * xs2 - r2 * xs1, r2 * xs0 - r0 * xs2, r0 * xs1 - r1 * xs0
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _heading(r0, r1, r2, v0, v1, v2):
     """:func:`kite_env.trajectory.heading_angle` of one vector (scalar branch)."""
     xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(r0, r1, r2)
@@ -185,14 +183,14 @@ def _heading(r0, r1, r2, v0, v1, v2):
     return _PI if psi <= -_PI else psi
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def _wrap(x):
     """:func:`kite_env.trajectory.wrap_angle` of a float: (-pi, pi]."""
     w = _PI - (_PI - x) % _TWO_PI
     return w + _TWO_PI if w <= -_PI else w
 
 
-@njit(**_JIT)
+@njit(**JIT)
 def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action,
                   samples, s_samples, window, ds, a, b, rot, force_scale, dl_max, tracking_scale,
                   parts, feats):

@@ -19,11 +19,11 @@ DOF_PER_NODE = 6
 
 def _numba_scatter():
     """The compiled scatter-add kernel when the numba element backend is in use, else None (``np.bincount``)."""
-    from .kernels import resolve_backend
+    from kite_env.compiled import resolve_backend
 
     if resolve_backend("auto") != "numba":
         return None
-    from .kernels import scatter_add
+    from .assembly_kernels import scatter_add
 
     return scatter_add
 

@@ -103,9 +103,9 @@ class BeamSet:
     GJ : (n_e,) float [N m^2]
         Torsional stiffness.
     backend : {"auto", "numba", "numpy"}
-        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.beam_internal`
+        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.beam_kernels.beam_internal`
         or the vectorised NumPy reference below (same result to round-off); ``"auto"`` resolves with
-        :func:`kite_env.structure.kernels.resolve_backend` (numba when importable).
+        :func:`kite_env.compiled.resolve_backend` (numba when importable).
 
     Scalars are broadcast to ``(n_e,)``.
     """
@@ -113,9 +113,9 @@ class BeamSet:
     n_en = 2  # nodes per element
 
     def __init__(self, conn, X0, up, EA, EI2, EI3, GJ, backend="auto"):
-        from . import kernels  # imports numba (once per process)
+        from kite_env.compiled import resolve_backend  # imports numba (once per process)
 
-        self.backend = kernels.resolve_backend(backend)
+        self.backend = resolve_backend(backend)
         self.conn = np.asarray(conn, dtype=np.int64).reshape(-1, 2)
         X0 = np.asarray(X0, dtype=float)
         n_e = self.conn.shape[0]
@@ -164,7 +164,7 @@ class BeamSet:
         stiffness depends on the deformation, ``dm/dtheta = K_l + g m m^T`` over the bending (y, z of both ends) and
         the twist components of the local moments ``m``; None = 0 (the secant alone)."""
         if self.backend == "numba":
-            from .kernels import beam_set_bending_torsion
+            from .beam_kernels import beam_set_bending_torsion
 
             empty = np.zeros(0)
             beam_set_bending_torsion(rows, EI, GJ, empty if g_bend is None else g_bend,
@@ -204,7 +204,7 @@ class BeamSet:
         """Current chord length ``l`` (n_e,) [m] and local end rotations ``theta`` (n_e, 2, 3) [rad] (element frame;
         x: twist, y/z: bending), the cheap part of :meth:`local_deformation` (compiled with the numba backend)."""
         if self.backend == "numba":
-            from .kernels import beam_local_rotations
+            from .beam_kernels import beam_local_rotations
 
             n = self.n_elem
             l, th = np.empty(n), np.empty((n, 2, 3))
@@ -271,8 +271,8 @@ class BeamSet:
         return f, (K if tangent else None)
 
     def _internal_numba(self, x_e, R_e, tangent: bool = True):
-        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.beam_internal`."""
-        from .kernels import beam_internal
+        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.beam_kernels.beam_internal`."""
+        from .beam_kernels import beam_internal
 
         x_e = np.ascontiguousarray(x_e, dtype=float)
         R_e = np.ascontiguousarray(R_e, dtype=float)

@@ -70,16 +70,16 @@ class HemSet:
     EA, EI, GJ : (n_e,) float [N, N m^2, N m^2]
         Axial, isotropic bending and torsional stiffness.
     backend : {"auto", "numba", "numpy"}
-        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.hem_internal` or
-        the NumPy reference below (``"auto"``: :func:`kite_env.structure.kernels.resolve_backend`). The NumPy
+        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.hem_kernels.hem_internal` or
+        the NumPy reference below (``"auto"``: :func:`kite_env.compiled.resolve_backend`). The NumPy
         reference costs about 0.3 ms per call at the wing's 36 elements, mostly NumPy's overhead on small arrays: a
         tenth of a flight's time.
     """
 
     def __init__(self, conn, X0, up, EA, EI, GJ, backend="auto"):
-        from . import kernels  # imports numba (once per process)
+        from kite_env.compiled import resolve_backend  # imports numba (once per process)
 
-        self.backend = kernels.resolve_backend(backend)
+        self.backend = resolve_backend(backend)
         self.conn = np.asarray(conn, dtype=np.int64).reshape(-1, 2)
         X0 = np.asarray(X0, dtype=float)
         d = X0[self.conn[:, 1]] - X0[self.conn[:, 0]]
@@ -124,7 +124,7 @@ class HemSet:
         """Internal forces ``f_e`` (n_e, 12) [N, N m] and tangent ``K_e`` (n_e, 12, 12) (None without ``tangent``),
         node-major ``[u1, w1, u2, w2]``; new arrays on every call, whatever the backend."""
         if self.backend == "numba":
-            from .kernels import hem_internal
+            from .hem_kernels import hem_internal
 
             x_e = np.ascontiguousarray(x_e, dtype=float)
             R_e = np.ascontiguousarray(R_e, dtype=float)

@@ -30,7 +30,7 @@ Cost: with the NumPy reference (``backend="numpy"``) ``internal`` at 360 element
 9-15 ms) on the shared 2-core development container, where ``BeamSet`` at 107 elements takes ~4 ms; the membrane
 is ~1.5 ms of it, the rest is the exact co-rotational bending tangent (``bending=False``: ~2 ms, but then
 rotations of canopy-only nodes have no stiffness and must be held fixed).  The compiled kernel
-(``backend="numba"``, the default when numba is installed; :mod:`kite_env.structure.kernels`) computes the same
+(``backend="numba"``, the default when numba is installed; :mod:`kite_env.structure.shell_kernels`) computes the same
 result to round-off in ~0.6 ms (``BeamSet``: ~0.18 ms).
 
 The DOF order per node is ``[du_x, du_y, du_z, dw_x, dw_y, dw_z]`` (spatial spins, frame K), as for
@@ -88,9 +88,9 @@ class ShellSet:
         Direction of the warp threads in the frame of ``X0``, projected onto each triangle's plane (the weft is
         perpendicular in the plane); used with ``shear_ratio != 1``.
     backend : {"auto", "numba", "numpy"}
-        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.kernels.shell_internal`
+        Implementation of :meth:`internal`: the compiled kernel :func:`kite_env.structure.shell_kernels.shell_internal`
         or the vectorised NumPy reference (same result to round-off); ``"auto"`` resolves with
-        :func:`kite_env.structure.kernels.resolve_backend` (numba when importable).  :meth:`energy` and
+        :func:`kite_env.compiled.resolve_backend` (numba when importable).  :meth:`energy` and
         :meth:`stresses` always use NumPy.
     kinematics : {"green_lagrange", "von_karman"}
         The membrane's strain: Green-Lagrange (exact for any rotation), or von Karman's moderate-rotation strain in
@@ -102,9 +102,9 @@ class ShellSet:
 
     def __init__(self, conn, X0, E, nu, h, wrinkling=True, eps_slack=1e-3, drill_factor=1e-6, bending=True,
                  shear_ratio=1.0, warp=(1.0, 0.0, 0.0), backend="auto", kinematics="green_lagrange"):
-        from . import kernels  # imports numba (once per process)
+        from kite_env.compiled import resolve_backend  # imports numba (once per process)
 
-        self.backend = kernels.resolve_backend(backend)
+        self.backend = resolve_backend(backend)
         self.conn = np.asarray(conn, dtype=np.int64).reshape(-1, 3)
         X0 = np.asarray(X0, dtype=float)
         n_e = self.conn.shape[0]
@@ -197,8 +197,8 @@ class ShellSet:
         return f, (K if tangent else None)
 
     def _internal_numba(self, x_e, R_e, tangent: bool = True):
-        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.kernels.shell_internal`."""
-        from .kernels import shell_internal
+        """:meth:`internal` through the compiled kernel :func:`kite_env.structure.shell_kernels.shell_internal`."""
+        from .shell_kernels import shell_internal
 
         x_e = np.ascontiguousarray(x_e, dtype=float)
         R_e = np.ascontiguousarray(R_e, dtype=float)

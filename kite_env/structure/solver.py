@@ -38,11 +38,11 @@ _WORK_TOL = 1e-14
 
 
 def _compiled_rotate():
-    from .kernels import resolve_backend
+    from kite_env.compiled import resolve_backend
 
     if resolve_backend("auto") != "numba":
         return None
-    from .kernels import rotate_nodes
+    from .rotation_kernels import rotate_nodes
 
     return rotate_nodes
 

@@ -7,13 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from kite_env import compiled
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations
 from kite_env.dynamics.particles import KCU, A, B, C, D, ParticleSystem
 from kite_env.dynamics.simulator import FlightSimulator
-from kite_env.structure import kernels as structure_kernels
 
-pytestmark = pytest.mark.skipif(not structure_kernels.NUMBA_AVAILABLE, reason="numba not installed")
+pytestmark = pytest.mark.skipif(not compiled.NUMBA_AVAILABLE, reason="numba not installed")
 
 # bridle points A, B, C, D in frame K [m]: x_k aft, y_k towards A, z_k up (away from the KCU)
 Q0 = np.array([[0.0, 2.6, 0.0], [0.55, 2.5, -0.08], [0.0, -2.6, 0.0], [0.55, -2.5, -0.08]])
@@ -157,9 +157,9 @@ def test_degenerate_geometry_gives_nan_like_numpy():
 def test_backend_selection(monkeypatch):
     assert simulator("numpy").backend == "numpy"
     assert simulator("numba").backend == "numba"
-    monkeypatch.setenv(structure_kernels.ENV_VAR, "numpy")
+    monkeypatch.setenv(compiled.ENV_VAR, "numpy")
     assert simulator("auto").backend == "numpy"
-    monkeypatch.setenv(structure_kernels.ENV_VAR, "numba")
+    monkeypatch.setenv(compiled.ENV_VAR, "numba")
     assert simulator("auto").backend == "numba"
     with pytest.raises(ValueError):
         simulator("cuda")

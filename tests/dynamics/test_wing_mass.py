@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from kite_env import compiled
 from kite_env.config import Config
 from kite_env.dynamics.kernels import particle_accelerations
 from kite_env.dynamics.particles import KCU, A, B, C, D
@@ -20,12 +21,11 @@ from kite_env.dynamics.simulator import FlightSimulator
 from kite_env.dynamics.wing_mass import condensed_wing_mass, nodal_wing_mass
 from kite_env.frames import kite_frame
 from kite_env.fsi import FlightState, nominal_wing
-from kite_env.structure import kernels as structure_kernels
 
 from test_flight import UniformWind  # noqa: E402  (the same uniform wind as the flight tests)
 
 TOTAL_KG = 10.0  # 2 (m_A + m_B), Table 1
-needs_numba = pytest.mark.skipif(not structure_kernels.NUMBA_AVAILABLE, reason="numba not installed")
+needs_numba = pytest.mark.skipif(not compiled.NUMBA_AVAILABLE, reason="numba not installed")
 
 
 def mirror_index(nodes):
@@ -214,7 +214,7 @@ def numpy_rhs(sim, t, r, v, frac=0.0):
     try:
         return sim._rhs(t, r, v, frac)[1:]
     finally:
-        sim.backend = "numba" if structure_kernels.NUMBA_AVAILABLE else "numpy"
+        sim.backend = "numba" if compiled.NUMBA_AVAILABLE else "numpy"
 
 
 def kernel_rhs(sim, t, r, v, frac=0.0):

@@ -1,4 +1,4 @@
-"""The compiled element kernels (kite_env.structure.kernels) against the NumPy reference implementations.
+"""The compiled element kernels (kite_env.structure.*_kernels) against the NumPy reference implementations.
 
 For random large-deformation states (taut, wrinkled and slack membranes; large and tiny rotations, so that every
 series / closed-form branch of the rotation functions is taken) and for the real kite mesh, the numba and numpy
@@ -10,9 +10,10 @@ backends of ``BeamSet``, ``HemSet`` and ``ShellSet`` must give the same force, t
 import numpy as np
 import pytest
 
+from kite_env import compiled
 from kite_env.geometry import build_kite
 from kite_env.geometry.mesh import BEAM_LE, BEAM_STRUT, BEAM_TE, BEAM_TIP
-from kite_env.structure import kernels
+from kite_env.structure import assembly_kernels, beam_kernels, rotation_kernels, shell_kernels, tube_kernels
 from kite_env.structure.beam import BeamSet
 from kite_env.structure.hem import HemSet
 from kite_env.structure.rotations import expm
@@ -66,7 +67,7 @@ def _assert_beams_agree(conn, X0, up, stiff, x, Rn):
     # energy of the kernel (not used by BeamSet.energy, which stays NumPy)
     n = bn.n_elem
     U = np.empty(n)
-    kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, bn._kmat, np.empty((n, 12)),
+    beam_kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, bn._kmat, np.empty((n, 12)),
                           np.empty((n, 12, 12)), U)
     _assert_energy_agree(U, bp.energy(xe, Re), K2, xe)
     return bp.local_deformation(xe, Re)
@@ -83,11 +84,11 @@ def _assert_shells_agree(s_args, x, R, **kw):
     assert K3 is None and np.array_equal(f3, f1)
     n = sn.n_elem
     U = np.empty(n)
-    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
+    shell_kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
                            sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U)
     _assert_energy_agree(U, sp.energy(x, R), K2, x)
     U3 = np.empty(n)
-    kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
+    shell_kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
                            sn.bending, np.empty((n, 18)), np.empty((1, 18, 18)), U3, False)
     assert np.array_equal(U3, U)
     return sp
@@ -95,35 +96,37 @@ def _assert_shells_agree(s_args, x, R, **kw):
 
 # ---------------------------------------------------------------------------------------------- backend switch
 def test_resolve_backend(monkeypatch):
-    monkeypatch.delenv(kernels.ENV_VAR, raising=False)
-    assert kernels.resolve_backend("auto") == "numba"
-    assert kernels.resolve_backend("numpy") == "numpy"
-    monkeypatch.setenv(kernels.ENV_VAR, "numpy")
-    assert kernels.resolve_backend("auto") == "numpy"
-    assert kernels.resolve_backend("numba") == "numba"  # an explicit choice wins over the variable
-    monkeypatch.setenv(kernels.ENV_VAR, "fortran")
+    monkeypatch.delenv(compiled.ENV_VAR, raising=False)
+    assert compiled.resolve_backend("auto") == "numba"
+    assert compiled.resolve_backend("numpy") == "numpy"
+    monkeypatch.setenv(compiled.ENV_VAR, "numpy")
+    assert compiled.resolve_backend("auto") == "numpy"
+    assert compiled.resolve_backend("numba") == "numba"  # an explicit choice wins over the variable
+    monkeypatch.setenv(compiled.ENV_VAR, "fortran")
     with pytest.raises(ValueError):
-        kernels.resolve_backend("auto")
+        compiled.resolve_backend("auto")
     with pytest.raises(ValueError):
-        kernels.resolve_backend("cuda")
+        compiled.resolve_backend("cuda")
 
 
 def test_thresholds_equal_reference_modules():
-    """The kernels hard-code the branch thresholds of the reference functions (numba caches on kernels.py only)."""
+    """The kernels hard-code the branch thresholds of the reference functions (numba caches on each kernel's own
+    file only)."""
     import inspect
 
-    from kite_env.structure import beam, rotations, shell_bending, shell_membrane
+    from kite_env.structure import beam, rotations, shell_bending, shell_membrane, tube
 
-    assert kernels._ROT_SMALL == rotations._SMALL
-    assert kernels._TSMALL == beam._TSMALL
-    assert kernels._TAUT_TOL == shell_membrane.TAUT_TOL
-    assert kernels._WRINKLE_MAX_ITER == shell_membrane._WRINKLE_MAX_ITER
-    assert kernels._WRINKLE_MAX_STEP == shell_membrane._WRINKLE_MAX_STEP
-    assert kernels._WRINKLE_STEP_TOL == shell_membrane._WRINKLE_STEP_TOL
-    assert "small = t < 1e-4" in inspect.getsource(rotations.tangent_inv) and kernels._TINV_SMALL == 1e-4
+    assert rotation_kernels._ROT_SMALL == rotations._SMALL
+    assert rotation_kernels._TSMALL == beam._TSMALL
+    assert shell_kernels._TAUT_TOL == shell_membrane.TAUT_TOL
+    assert shell_kernels._WRINKLE_MAX_ITER == shell_membrane._WRINKLE_MAX_ITER
+    assert shell_kernels._WRINKLE_MAX_STEP == shell_membrane._WRINKLE_MAX_STEP
+    assert shell_kernels._WRINKLE_STEP_TOL == shell_membrane._WRINKLE_STEP_TOL
+    assert "small = t < 1e-4" in inspect.getsource(rotations.tangent_inv) and rotation_kernels._TINV_SMALL == 1e-4
     src = inspect.getsource(shell_bending._log_rotation)
-    assert "small = s < 1e-4" in src and kernels._LOGROT_SMALL == 1e-4
-    assert "far = c < 1e-3" in src and kernels._LOGROT_FAR == 1e-3
+    assert "small = s < 1e-4" in src and rotation_kernels._LOGROT_SMALL == 1e-4
+    assert "far = c < 1e-3" in src and rotation_kernels._LOGROT_FAR == 1e-3
+    assert tube_kernels._FOLD_LINEAR == tube._FOLD_LINEAR
 
 
 def test_outputs_are_fresh_arrays_and_shapes_checked():
@@ -287,7 +290,7 @@ def test_kite_mesh_shells_agree(kite, amp, shear_ratio):
 @pytest.fixture(params=["numba", "numpy"])
 def backend(request, monkeypatch):
     """Route ``backend="auto"`` of every element set built inside a test to one backend."""
-    monkeypatch.setenv(kernels.ENV_VAR, request.param)
+    monkeypatch.setenv(compiled.ENV_VAR, request.param)
     assert BeamSet([[0, 1]], np.eye(3)[:2], [0.0, 0.0, 1.0], 1.0, 1.0, 1.0, 1.0).backend == request.param
     assert ShellSet([[0, 1, 2]], np.eye(3), 1.0, 0.3, 1.0).backend == request.param
     assert HemSet([[0, 1]], np.eye(3)[:2], [0.0, 0.0, 1.0], 1.0, 1.0, 1.0).backend == request.param
@@ -321,7 +324,7 @@ def test_shell_wrinkling_per_backend(backend):
 
 
 def test_rotate_nodes_matches_rodrigues():
-    from kite_env.structure.kernels import rotate_nodes
+    from kite_env.structure.rotation_kernels import rotate_nodes
     from kite_env.structure.rotations import expm
 
     rng = np.random.default_rng(5)
@@ -362,10 +365,10 @@ def test_gathered_csc_product_is_scipys_product_of_the_gathered_matrix():
     data = rng.normal(size=n_big)
     x = rng.normal(size=n)
     out = np.full(n, np.nan)
-    kernels.csc_gather_matvec(data, entries, A.indices, A.indptr, 0.37, x, out)
+    assembly_kernels.csc_gather_matvec(data, entries, A.indices, A.indptr, 0.37, x, out)
     ref = sp.csc_matrix((0.37 * data[entries], A.indices, A.indptr), shape=(n, n)) @ x
     assert np.array_equal(out, ref)
-    kernels.csc_gather_matvec(data, entries, A.indices, A.indptr, 0.0, x, out)
+    assembly_kernels.csc_gather_matvec(data, entries, A.indices, A.indptr, 0.0, x, out)
     assert np.array_equal(out, np.zeros(n))
 
 

@@ -37,7 +37,7 @@ def test_tangent_inv_matches_finite_difference():
 def test_compiled_relative_rotation_vectors_match_logm():
     # the wing's rotations over a time step (kite_env.dynamics.wing_dynamics): the compiled loop against
     # logm(R1 R0^T), from round-off-sized rotations to nearly half a turn, on every branch of Shepperd's quaternion
-    from kite_env.structure.kernels import relative_rotation_vectors
+    from kite_env.structure.rotation_kernels import relative_rotation_vectors
 
     rng = np.random.default_rng(3)
     R0 = expm(rng.normal(size=(300, 3)))
