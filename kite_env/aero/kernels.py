@@ -33,8 +33,8 @@ resolved by :func:`kite_env.compiled.resolve_backend`: environment variable ``KI
 else numba when importable). Without numba the kernel below runs as plain Python (correct, very slow).
 
 Differences from the reference outside round-off: none for valid sections. A degenerate section (LE and TE node
-coincident, or a spanwise direction parallel to the chord) makes NumPy return ``nan``/``inf`` with a warning,
-whereas the compiled kernel (numba's default Python error model) raises ``ZeroDivisionError``.
+coincident, or a spanwise direction parallel to the chord) gives ``nan``/``inf`` in both (NumPy with a warning; the
+kernel has numba's NumPy error model, below).
 
 Implementation rules (as :mod:`kite_env.compiled`): ``cache=True``, ``fastmath=False`` (IEEE semantics);
 no array views inside the section loop and only scalars passed to helpers (views cost reference-count updates);
