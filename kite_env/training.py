@@ -19,7 +19,8 @@ from kite_env.envs import ENV_ID, FAST_ENV_ID
 ALGOS = ("ppo", "sac")
 VEC_ENVS = ("batched", "subproc", "dummy")
 #: recipe keys that are not constructor arguments of the algorithm
-_META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs", "env", "vec_env"}
+_META_KEYS = {"policy", "normalize", "checkpoint_freq", "eval_freq", "eval_episodes", "n_envs", "env", "vec_env",
+              "action_hold"}
 #: offset of the evaluation env's seed from the training seed (held-out episodes)
 EVAL_SEED_OFFSET = 10_000
 _DEFAULT_HP = {
@@ -103,6 +104,9 @@ def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = FAST_
     vec = hp.get("vec_env")
     if vec is not None and vec not in VEC_ENVS:
         raise UsageError(f"recipe '{p}': vec_env must be one of {', '.join(VEC_ENVS)}, got {vec!r}")
+    hold = hp.get("action_hold", 1)
+    if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
+        raise UsageError(f"recipe '{p}': action_hold must be a whole number of control steps >= 1, got {hold!r}")
     return hp
 
 
@@ -147,16 +151,19 @@ def recipe_overrides(hp: dict) -> list[str]:
 WORKER_FAILURES = ".worker_failures"
 
 
-def _make_env(cfg, report_dir: Path | None = None):
+def _make_env(cfg, report_dir: Path | None = None, action_hold: int = 1):
     """A thunk making the env of ``cfg``; with ``report_dir`` (``subproc`` workers) the env writes a
     :class:`~kite_env.dynamics.simulator.NumericalFailure` that ends its worker into that folder first, so that the
-    main process can report it as in one process (:func:`_worker_failure`)."""
+    main process can report it as in one process (:func:`_worker_failure`); with ``action_hold`` > 1 the agent's
+    action is held that many control steps (:class:`kite_env.envs.hold.HeldAction`)."""
 
     def thunk():
         from kite_env.envs.figure_eight import KiteFigureEightEnv
+        from kite_env.envs.hold import HeldAction
 
         env = KiteFigureEightEnv(config=cfg)
-        return env if report_dir is None else _reporting(env, report_dir)
+        env = env if report_dir is None else _reporting(env, report_dir)
+        return env if action_hold == 1 else HeldAction(env, action_hold)
 
     return thunk
 
@@ -225,13 +232,18 @@ def _close(venv) -> None:
 
 
 def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: str, training: bool = True,
-             monitor_file: Path | None = None, append: bool = False, report_dir: Path | None = None):
+             monitor_file: Path | None = None, append: bool = False, report_dir: Path | None = None,
+             action_hold: int = 1):
     """``n_envs`` envs of ``cfg`` as a ``kind`` VecEnv (``VEC_ENVS``) seeded ``seed + i``, in ``VecMonitor`` (writing
     ``monitor_file``, appended to with ``append``) and, with ``normalize``, ``VecNormalize``; ``subproc`` workers
-    report a NumericalFailure into ``report_dir`` (:func:`_make_env`)."""
+    report a NumericalFailure into ``report_dir`` (:func:`_make_env`); each env holds the agent's action
+    ``action_hold`` control steps (``dummy`` and ``subproc`` only)."""
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
+    if action_hold != 1 and kind == "batched":
+        raise UsageError(f"action_hold {action_hold} needs vec_env dummy or subproc (the batched env steps every "
+                         "kite every control step)")
     if kind == "batched":
         from kite_env.envs.vector import KiteFigureEightVectorEnv, SB3VecEnv
 
@@ -241,9 +253,9 @@ def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: s
             raise UsageError(f"--vec-env batched: {exc}") from None
     else:
         if kind == "subproc":
-            venv = SubprocVecEnv([_make_env(cfg, report_dir) for _ in range(n_envs)])
+            venv = SubprocVecEnv([_make_env(cfg, report_dir, action_hold) for _ in range(n_envs)])
         else:
-            venv = DummyVecEnv([_make_env(cfg) for _ in range(n_envs)])
+            venv = DummyVecEnv([_make_env(cfg, action_hold=action_hold) for _ in range(n_envs)])
     venv.seed(seed)  # env i: reset(seed=seed + i) at the first reset
     if monitor_file is not None and append and monitor_file.is_file():
         venv = VecMonitor(venv)  # continue the run's monitor file (the column t restarts at 0 in a resumed run)
@@ -255,13 +267,16 @@ def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: s
     return venv
 
 
-def _vec_env_kind(requested: str | None, fidelity: str, n_envs: int) -> str:
+def _vec_env_kind(requested: str | None, fidelity: str, n_envs: int, action_hold: int = 1) -> str:
     if requested is None:
-        if fidelity == "surrogate" and n_envs > 1:
+        if fidelity == "surrogate" and n_envs > 1 and action_hold == 1:
             return "batched"
-        return "subproc" if n_envs > 1 else "dummy"
+        return "subproc" if n_envs > 1 and fidelity != "surrogate" else "dummy"
     if requested == "batched" and fidelity != "surrogate":
         raise UsageError(f"vec_env 'batched' needs sim.fidelity surrogate, got {fidelity!r} (use subproc or dummy)")
+    if requested == "batched" and action_hold != 1:
+        raise UsageError(f"action_hold {action_hold} needs vec_env dummy or subproc (the batched env steps every "
+                         "kite every control step)")
     return requested
 
 

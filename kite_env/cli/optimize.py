@@ -73,9 +73,10 @@ def _objective(args, cfg, env_id, hp, kind, n_envs):
         kwargs = schedules({**{k: v for k, v in hp.items() if k not in _META_KEYS}, **params})
         gamma = float(kwargs.get("gamma", 0.99))
         seed = args.seed + trial.number
-        venv = _vec_env(cfg, n_envs, seed, bool(hp["normalize"]), gamma, kind)
+        hold = int(hp.get("action_hold", 1))
+        venv = _vec_env(cfg, n_envs, seed, bool(hp["normalize"]), gamma, kind, action_hold=hold)
         eval_env = _vec_env(cfg, 1, args.seed + VALIDATION_SEED_OFFSET, bool(hp["normalize"]), gamma,
-                            "batched" if kind == "batched" else "dummy", training=False)
+                            "batched" if kind == "batched" else "dummy", training=False, action_hold=hold)
         model = _algo_class(args.algo)(hp["policy"], venv, seed=seed, device="cpu", verbose=0, **kwargs)
         every = max(1, int(hp["eval_freq"]) // n_envs)
         episodes = int(hp["eval_episodes"])
@@ -166,7 +167,7 @@ def optimize(args) -> Path:
 
     cfg, env_id, hp = training_config(args)
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
-    kind = _vec_env_kind(args.vec_env or hp.get("vec_env"), cfg.sim.fidelity, n_envs)
+    kind = _vec_env_kind(args.vec_env or hp.get("vec_env"), cfg.sim.fidelity, n_envs, hp.get("action_hold", 1))
     if cfg.sim.fidelity == "surrogate":
         from kite_env.surrogate import surrogate_for
 

@@ -101,7 +101,7 @@ def train(args) -> Path:
     n_envs = int(args.n_envs or hp.get("n_envs", 1))
     if n_envs < 1:
         raise UsageError(f"--n-envs must be >= 1, got {n_envs}")
-    kind = _vec_env_kind(args.vec_env or hp.get("vec_env"), cfg.sim.fidelity, n_envs)
+    kind = _vec_env_kind(args.vec_env or hp.get("vec_env"), cfg.sim.fidelity, n_envs, hp.get("action_hold", 1))
     ckpt_dir = out / "checkpoints"
     latest = _latest_checkpoint(ckpt_dir) if args.resume else None
     if args.resume and latest is None:
@@ -127,11 +127,12 @@ def train(args) -> Path:
     gamma = float(hp.get("gamma", 0.99))
     report_dir = out / WORKER_FAILURES
     _worker_failure(report_dir)  # (a report left by an earlier run that was killed: dropped)
+    hold = int(hp.get("action_hold", 1))
     venv = _vec_env(cfg, n_envs, args.seed, bool(hp["normalize"]), gamma, kind, monitor_file=out / "monitor.csv",
-                    append=latest is not None, report_dir=report_dir)
+                    append=latest is not None, report_dir=report_dir, action_hold=hold)
     # held-out episodes in the same randomised conditions (one env; batched stays batched, one kite)
     eval_env = _vec_env(cfg, 1, args.seed + EVAL_SEED_OFFSET, bool(hp["normalize"]), gamma,
-                        "batched" if kind == "batched" else "dummy", training=False)
+                        "batched" if kind == "batched" else "dummy", training=False, action_hold=hold)
     kwargs = schedules({k: v for k, v in hp.items() if k not in _META_KEYS})
     Algo = _algo_class(args.algo)
     if latest is not None:

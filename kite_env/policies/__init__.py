@@ -82,17 +82,41 @@ class ConstantAgent:
 
 
 class ModelAgent:
-    """A saved SB3 model (PPO or SAC) with the observation normalisation it was trained with."""
+    """A saved SB3 model (PPO or SAC) with the observation normalisation it was trained with; an agent trained to
+    decide every ``action_hold``-th control step (:mod:`kite_env.envs.hold`) decides at the first step of an
+    episode and every ``action_hold`` steps after it, and repeats its last action in between."""
 
-    def __init__(self, model, obs_norm=None):
+    def __init__(self, model, obs_norm=None, action_hold: int = 1):
         self.model = model
         self.obs_norm = obs_norm
+        self.action_hold = int(action_hold)
+        self._held: np.ndarray | None = None
+        self._age: np.ndarray | None = None
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+    def _decide(self, observation, state, episode_start, deterministic):
         obs = np.asarray(observation, dtype=np.float32)
         if self.obs_norm is not None:
             obs = self.obs_norm.normalize_obs(obs)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        if self.action_hold == 1:
+            return self._decide(observation, state, episode_start, deterministic)
+        obs = np.asarray(observation)
+        n = 1 if obs.ndim == 1 else obs.shape[0]
+        if self._age is None or self._age.shape[0] != n:  # the first call: every row starts
+            self._age, self._held = np.zeros(n, dtype=np.int64), None
+        elif episode_start is not None:
+            self._age[np.asarray(episode_start, dtype=bool).reshape(-1)] = 0
+        due = self._age % self.action_hold == 0
+        action, state = self._decide(observation, state, episode_start, deterministic)
+        action = np.array(action)
+        if self._held is not None and not due.all():  # the rows not due repeat their action
+            rows = action.reshape(n, -1)
+            rows[~due] = self._held.reshape(n, -1)[~due]
+        self._held = action.copy()
+        self._age += 1
+        return action, state
 
 
 def model_algorithm(path: Path) -> str:
@@ -120,6 +144,25 @@ def model_record(path: Path) -> dict | None:
             except json.JSONDecodeError as exc:
                 raise PolicyError(f"'{f}' is not valid JSON: {exc}") from None
     return None
+
+
+def model_action_hold(path: Path) -> int:
+    """The control steps an agent holds each action (``action_hold`` of its recipe, :mod:`kite_env.envs.hold`): from
+    the ``args.yml`` of its ``kite-train`` run folder (next to ``model.zip``, or one folder up), 1 without one."""
+    import yaml
+
+    for folder in (path.parent, path.parent.parent):
+        f = folder / "args.yml"
+        if f.is_file():
+            try:
+                args = yaml.safe_load(f.read_text()) or {}
+            except yaml.YAMLError as exc:
+                raise PolicyError(f"'{f}' is not valid YAML: {exc}") from None
+            hold = (args.get("hyperparameters") or {}).get("action_hold", 1)
+            if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
+                raise PolicyError(f"'{f}': action_hold must be a whole number >= 1, got {hold!r}")
+            return hold
+    return 1
 
 
 def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = None) -> ModelAgent:
@@ -159,7 +202,7 @@ def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = No
         if not hasattr(norm, "normalize_obs"):
             raise PolicyError(f"normalisation file '{vn}' is not a VecNormalize object")
         norm.training = False
-    return ModelAgent(model, norm)
+    return ModelAgent(model, norm, model_action_hold(path))
 
 
 def make_agent(spec: str, env, seed: int = 0):
@@ -208,4 +251,4 @@ def policy_label(spec: str) -> str:
 
 
 __all__ = ["MODELS_DIR", "SHIPPED", "ConstantAgent", "ModelAgent", "PolicyError", "RandomAgent", "load_model_agent",
-           "make_agent", "model_algorithm", "model_path", "policy_label", "shipped_model"]
+           "make_agent", "model_action_hold", "model_algorithm", "model_path", "policy_label", "shipped_model"]
