@@ -133,6 +133,48 @@ def test_batched_kites_equal_single_kites(setup):
     assert rec.line_tension.shape == (4,) and np.isfinite(rec.tether_force) and rec.wing.alpha.shape == (3,)
 
 
+def test_blocks_of_kites_with_inactive_ones_equal_single_kites(setup):
+    """More kites than a block (:data:`BLOCK` + 3, so the last block is short), some of them inactive in some steps
+    (the blocks gather the active ones): every kite's state, inputs, wing outputs and status are bit for bit those of
+    the same kite flown alone (n = 1, one row per MLP call), and an inactive kite does not move."""
+    from kite_env.dynamics.fast import BLOCK
+
+    cfg, wing, sw, path = setup
+    n = BLOCK + 3
+    singles = []
+    for k, s0 in enumerate((0.0, 0.4, 5.9)):
+        wf = WindField(dataclasses.replace(cfg.wind, speed_mps=5.0 + 0.5 * k, turbulence_intensity=0.04 * k, seed=k))
+        sim = SurrogateFlightSimulator(cfg, wf, surrogate=sw, wing=wing)
+        _start(sim, path, s0)
+        singles.append(sim)
+    ks = SurrogateKites(cfg, sw, wing.design_bridle, singles[0].tip_lengths, n)
+    ones = [SurrogateKites(cfg, sw, wing.design_bridle, singles[0].tip_lengths, 1) for _ in range(n)]
+    for k in range(n):
+        sim = singles[k % 3]
+        for arr, row in ((ks, k), (ones[k], 0)):
+            arr.set_wind(row, sim.wind)
+            arr.set_kite(row, sim.state.r, sim.state.v, sim.t, sim.pair_stiffness, sim.L_B0, sim.L_D0)
+    ks.evaluate()
+    for one in ones:
+        one.evaluate()
+    steer = np.linspace(-0.04, 0.04, n)
+    L0 = np.array([singles[k % 3].L_B0 for k in range(n)])
+    names = ("r", "v", "t", "Y", "X", "Z", "R", "wind", "tension", "length", "tether_force", "tether_length",
+             "reel_speed", "status")
+    for step in range(12):
+        L_B, L_D = L0 - steer * np.sin(0.3 * step), L0 + steer * np.sin(0.3 * step)
+        active = np.ones(n, dtype=bool) if step % 3 == 0 else (np.arange(n) % (2 + step % 3)) != 0
+        before = ks.r.copy()
+        ks.step(L_B, L_D, active)
+        assert np.array_equal(ks.r[~active], before[~active])
+        for k in np.flatnonzero(active):
+            ones[k].step(L_B[k:k + 1], L_D[k:k + 1])
+        for k, one in enumerate(ones):
+            for name in names:
+                assert np.array_equal(getattr(one, name)[0], getattr(ks, name)[k], equal_nan=True), (name, step, k)
+    assert np.all(ks.status == OK)
+
+
 def test_the_latent_filters_follow_the_inputs_as_in_the_fit(setup):
     """The reduced-order wing's latent state in the kernel: ``evaluate`` starts the filters at the current inputs
     (a steady start: history inputs zero, ``Z`` the filtered inputs); each step updates them with the step's end
@@ -248,6 +290,44 @@ def test_compiled_tanh_is_accurate():
     nan = np.array([np.nan, 0.5])
     tanh_inplace(nan)
     assert np.isnan(nan[0]) and abs(nan[1] - np.tanh(0.5)) < 3e-10
+
+
+@pytest.mark.parametrize("weights", ["shipped", "odd"])
+def test_mlp_rows_is_mlp_row_row_by_row(setup, weights):
+    """The engine's block MLP (:func:`mlp_rows`, rows in groups of four, inputs in groups of four) gives each row's
+    outputs bit for bit as :func:`mlp_row` on that row alone, for blocks that do not divide the number of rows (the
+    last block short; rows left over from the groups of four; work arrays longer than the block), inputs far outside
+    the envelope and a NaN input. ``odd``: random layers whose widths are no multiple of 4 (inputs left over)."""
+    from kite_env.dynamics.fast import BLOCK, mlp_row, mlp_rows
+
+    cfg, wing, sw, path = setup
+    rng = np.random.default_rng(7)
+    if weights == "shipped":
+        ks = SurrogateKites(cfg, sw, wing.design_bridle, np.ones(2), 1)
+        wts = ks._weights
+        lo, hi = sw.x_min, sw.x_max
+    else:
+        sizes = (31, 13, 10, 17)
+        wts = tuple(a for n_i, n_o in zip(sizes[:-1], sizes[1:])
+                    for a in (rng.normal(0.0, 0.6, (n_i, n_o)).astype(np.float32),
+                              rng.normal(0.0, 0.3, n_o).astype(np.float32)))
+        lo, hi = -np.ones(31), np.ones(31)
+    n_in, n_out = wts[0].shape[0], wts[4].shape[1]
+    X = lo + rng.uniform(-0.2, 1.2, (23, n_in)) * (hi - lo)
+    X[3] *= 40.0  # saturated units
+    X[11, n_in - 1] = np.nan
+    h = [np.empty(w.shape[1], dtype=np.float32) for w in wts[::2]]
+    ref = np.empty((len(X), n_out))
+    for k, x in enumerate(X):
+        mlp_row(x, *wts, *h, ref[k])
+    assert np.isnan(ref[11]).all() and np.isfinite(np.delete(ref, 11, axis=0)).all()
+    for block in sorted({1, 3, 4, 5, 6, BLOCK, 16}):
+        hb = [np.empty((block + 2, w.shape[1]), dtype=np.float32) for w in wts[::2]]
+        got = np.full((len(X), n_out), -1.0)
+        for s in range(0, len(X), block):
+            nb = min(block, len(X) - s)
+            mlp_rows(X[s:s + nb], nb, *wts, *hb, got[s:s + nb])
+        np.testing.assert_array_equal(got, ref, err_msg=f"block {block}")
 
 
 def _compiled(ks, x):
