@@ -274,7 +274,9 @@ def test_shipped_recipes_give_the_training_conditions(path):
     from kite_env.config import load_config
 
     hp = train_cli.load_hyperparameters(path, path.stem, train_cli.FAST_ENV_ID)
-    assert hp["n_envs"] == 16 and hp["vec_env"] == "batched"
+    # PPO steps its 16 kites in one batch; SAC, which holds each action 5 steps, steps 16 single envs
+    assert hp["n_envs"] == 16
+    assert (hp["vec_env"], hp.get("action_hold", 1)) == {"ppo": ("batched", 1), "sac": ("dummy", 5)}[path.stem]
     env = load_config(None, train_cli.recipe_overrides(hp)).env
     # the conditions the reduced-order wing was fitted in (kite_env.fitting.trajectories.EpisodePlan)
     assert (env.wind_speed_min_mps, env.wind_speed_max_mps) == (4.0, 10.0)

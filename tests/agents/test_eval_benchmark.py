@@ -22,13 +22,13 @@ ZOO_HEADER = "| algo | env_id | mean_reward | std_reward | n_timesteps | eval_ep
 
 
 def test_tiny_benchmark_writes_the_zoo_table(tmp_path, monkeypatch, capsys):
-    """baseline and random (and 'sac', not shipped: left out with a warning) on one held-out episode each in the
+    """baseline and random (and 'sac', its model missing: left out with a warning) on one held-out episode each in the
     fast fidelity of the default model, in the shipped PPO recipe's randomised conditions: the zoo table's rows are
     kite-eval's numbers, under the env id of that fidelity (KiteFigureEightFast-v1)."""
     from kite_env.cli.train import default_recipe
     from kite_env.envs import FAST_ENV_ID
 
-    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", tmp_path / "no_models")  # 'sac' is not shipped: left out
+    monkeypatch.setattr(kite_env.policies, "MODELS_DIR", tmp_path / "no_models")  # no 'sac' model: left out
     monkeypatch.setattr(kite_env.plots, "make_plots", lambda log, cfg, out: [])
     out = tmp_path / "bench"
     assert eval_cli.main(["benchmark", "--out", str(out), "--policies", "baseline", "random", "sac", "--episodes",

@@ -1,5 +1,5 @@
-"""The policy benchmark: the shipped PPO agent against the paper's controller and a negative control, in the fast
-fidelity of the default model, on held-out seeds (70000 and up: used neither in training, nor in its evaluations,
+"""The policy benchmark: the shipped PPO and SAC agents against the paper's controller and a negative control, in the
+fast fidelity of the default model, on held-out seeds (70000 and up: used neither in training, nor in its evaluations,
 nor in the choice of the checkpoint; ``kite_env.training.select_checkpoint`` lists the project's seed ranges).
 
 Every policy flies the same episodes: one env, ``reset(seed=s)`` for each, so each seed's start (the start table's
@@ -7,10 +7,10 @@ entry for the drawn wind, turbulence, start point and speed) is the same for all
 trained in (the shipped recipe's conditions: wind 4-10 m/s, turbulence up to 0.1, starts on the straight parts of the
 figure-eight). The comparison is paired, seed by seed: the difference of the returns, mean +- standard error.
 
-What it asserts is what ``agents/models/ppo/README.md`` reports: the agent's lead over the paper's controller on these
-episodes (within three standard errors of the measured lead, and more than three above zero), and ``constant:0`` (no
-steering at all) losing to the controller by more than three standard errors, so that a benchmark that could not
-tell a steering policy from none fails.
+What it asserts is what ``agents/models/ppo/README.md`` and ``agents/models/sac/README.md`` report: each agent's lead
+over the paper's controller on these episodes (within three standard errors of the measured lead, and more than three
+above zero), and ``constant:0`` (no steering at all) losing to the controller by more than three standard errors, so
+that a benchmark that could not tell a steering policy from none fails.
 """
 
 from __future__ import annotations
@@ -24,9 +24,12 @@ DURATION_S = 20.0
 #: the paired lead of the shipped PPO over the baseline on SEEDS (return per 20 s episode) when it shipped:
 #: 218.3 +- 43.4 (agents/models/ppo/README.md); the baseline's mean return is 1,938
 PPO_LEAD = 218.3
+#: the same for the shipped SAC (it decides every fifth step and holds its action): 242.6 +- 20.3
+#: (agents/models/sac/README.md)
+SAC_LEAD = 242.6
 
 
-def fly_benchmark(specs=("baseline", "ppo", "constant:0")) -> dict[str, list[dict]]:
+def fly_benchmark(specs=("baseline", "ppo", "sac", "constant:0")) -> dict[str, list[dict]]:
     """Each policy of ``specs`` over the episodes of :data:`SEEDS`: ``run_episode``'s info per episode."""
     from kite_env.config import load_config
     from kite_env.envs.figure_eight import KiteFigureEightEnv
@@ -56,7 +59,7 @@ def _paired(flights, a: str, b: str) -> tuple[float, float]:
 
 def test_every_policy_flew_the_same_episodes(flights):
     keys = ("wind_speed_mps", "turbulence_intensity", "wind_seed", "start_s", "initial_speed_mps")
-    for spec in ("ppo", "constant:0"):
+    for spec in ("ppo", "sac", "constant:0"):
         for x, y in zip(flights["baseline"], flights[spec]):
             assert [x[k] for k in keys] == [y[k] for k in keys]
 
@@ -71,6 +74,13 @@ def test_the_shipped_ppo_leads_the_papers_controller_and_does_not_crash(flights)
     assert "ground" not in ends
     assert sum(e == "outside surrogate envelope" for e in ends) <= 1, ends
     assert all(e in ("time limit", "outside surrogate envelope") for e in ends), ends
+
+
+def test_the_shipped_sac_leads_the_papers_controller_and_completes_every_episode(flights):
+    lead, se = _paired(flights, "sac", "baseline")
+    assert lead > 3.0 * se
+    assert abs(lead - SAC_LEAD) <= 3.0 * se, (lead, se)
+    assert [x["termination_reason"] for x in flights["sac"]] == ["time limit"] * len(SEEDS)
 
 
 def test_no_steering_loses_to_the_papers_controller(flights):
