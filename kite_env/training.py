@@ -104,9 +104,12 @@ def load_hyperparameters(path: str | Path | None, algo: str, env_id: str = FAST_
     vec = hp.get("vec_env")
     if vec is not None and vec not in VEC_ENVS:
         raise UsageError(f"recipe '{p}': vec_env must be one of {', '.join(VEC_ENVS)}, got {vec!r}")
-    hold = hp.get("action_hold", 1)
-    if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
-        raise UsageError(f"recipe '{p}': action_hold must be a whole number of control steps >= 1, got {hold!r}")
+    from kite_env.envs.hold import check_action_hold
+
+    try:
+        check_action_hold(hp.get("action_hold", 1))
+    except ValueError as exc:
+        raise UsageError(f"recipe '{p}': {exc}") from None
     return hp
 
 
@@ -237,14 +240,11 @@ def _vec_env(cfg, n_envs: int, seed: int, normalize: bool, gamma: float, kind: s
     """``n_envs`` envs of ``cfg`` as a ``kind`` VecEnv (``VEC_ENVS``) seeded ``seed + i``, in ``VecMonitor`` (writing
     ``monitor_file``, appended to with ``append``) and, with ``normalize``, ``VecNormalize``; ``subproc`` workers
     report a NumericalFailure into ``report_dir`` (:func:`_make_env`); each env holds the agent's action
-    ``action_hold`` control steps (``dummy`` and ``subproc`` only)."""
+    ``action_hold`` control steps (``dummy`` and ``subproc``; :func:`_vec_env_kind` checks the kind)."""
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
-    if action_hold != 1 and kind == "batched":
-        raise UsageError(f"action_hold {action_hold} needs vec_env dummy or subproc (the batched env steps every "
-                         "kite every control step)")
-    if kind == "batched":
+    if kind == "batched":  # (with action_hold 1: _vec_env_kind refuses a hold with the batched env)
         from kite_env.envs.vector import KiteFigureEightVectorEnv, SB3VecEnv
 
         try:

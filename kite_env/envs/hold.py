@@ -15,15 +15,20 @@ from __future__ import annotations
 import gymnasium as gym
 
 
+def check_action_hold(k) -> int:
+    """``k`` as the number of control steps an action is held: a whole number >= 1, else ``ValueError``."""
+    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
+        raise ValueError(f"action_hold must be a whole number of control steps >= 1, got {k!r}")
+    return k
+
+
 class HeldAction(gym.Wrapper):
     """Each action held for ``k`` control steps of ``env``: one step of this wrapper returns the observation after
     them, the sum of their rewards and the info of the last; it ends at the control step that ends the episode."""
 
     def __init__(self, env: gym.Env, k: int):
         super().__init__(env)
-        if int(k) != k or k < 1:
-            raise ValueError(f"action_hold must be a whole number of control steps >= 1, got {k!r}")
-        self.k = int(k)
+        self.k = check_action_hold(k)
 
     def step(self, action):
         total = 0.0

@@ -109,6 +109,9 @@ class ModelAgent:
         elif episode_start is not None:
             self._age[np.asarray(episode_start, dtype=bool).reshape(-1)] = 0
         due = self._age % self.action_hold == 0
+        if self._held is not None and not due.any():  # no row decides: the network is not evaluated
+            self._age += 1
+            return self._held.copy(), state
         action, state = self._decide(observation, state, episode_start, deterministic)
         action = np.array(action)
         if self._held is not None and not due.all():  # the rows not due repeat their action
@@ -133,36 +136,45 @@ def model_algorithm(path: Path) -> str:
     raise PolicyError(f"model file '{path}': neither a PPO nor a SAC model")
 
 
+def _run_file(path: Path, name: str) -> Path | None:
+    """The file ``name`` of the ``kite-train`` run folder of the model ``path``: next to it, or one folder up for
+    ``checkpoints/`` and ``eval/``; None without one."""
+    for folder in (path.parent, path.parent.parent):
+        if (folder / name).is_file():
+            return folder / name
+    return None
+
+
 def model_record(path: Path) -> dict | None:
     """The model an agent was trained on (:func:`kite_env.config.fingerprint`): the ``model.json`` of its
-    ``kite-train`` run folder (next to ``model.zip``, or one folder up for ``checkpoints/`` and ``eval/``)."""
-    for folder in (path.parent, path.parent.parent):
-        f = folder / "model.json"
-        if f.is_file():
-            try:
-                return json.loads(f.read_text())
-            except json.JSONDecodeError as exc:
-                raise PolicyError(f"'{f}' is not valid JSON: {exc}") from None
-    return None
+    ``kite-train`` run folder (:func:`_run_file`)."""
+    f = _run_file(path, "model.json")
+    if f is None:
+        return None
+    try:
+        return json.loads(f.read_text())
+    except json.JSONDecodeError as exc:
+        raise PolicyError(f"'{f}' is not valid JSON: {exc}") from None
 
 
 def model_action_hold(path: Path) -> int:
     """The control steps an agent holds each action (``action_hold`` of its recipe, :mod:`kite_env.envs.hold`): from
-    the ``args.yml`` of its ``kite-train`` run folder (next to ``model.zip``, or one folder up), 1 without one."""
+    the ``args.yml`` of its ``kite-train`` run folder (:func:`_run_file`), 1 without one."""
     import yaml
 
-    for folder in (path.parent, path.parent.parent):
-        f = folder / "args.yml"
-        if f.is_file():
-            try:
-                args = yaml.safe_load(f.read_text()) or {}
-            except yaml.YAMLError as exc:
-                raise PolicyError(f"'{f}' is not valid YAML: {exc}") from None
-            hold = (args.get("hyperparameters") or {}).get("action_hold", 1)
-            if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
-                raise PolicyError(f"'{f}': action_hold must be a whole number >= 1, got {hold!r}")
-            return hold
-    return 1
+    from kite_env.envs.hold import check_action_hold
+
+    f = _run_file(path, "args.yml")
+    if f is None:
+        return 1
+    try:
+        args = yaml.safe_load(f.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise PolicyError(f"'{f}' is not valid YAML: {exc}") from None
+    try:
+        return check_action_hold((args.get("hyperparameters") or {}).get("action_hold", 1))
+    except ValueError as exc:
+        raise PolicyError(f"'{f}': {exc}") from None
 
 
 def load_model_agent(path: str | Path, env, vecnormalize: str | Path | None = None) -> ModelAgent:

@@ -28,7 +28,8 @@ class _Decider:
 
 def test_a_held_action_agent_flies_as_it_was_trained():
     """HeldAction(env, 5) stepped with the decider's actions and a ModelAgent(action_hold=5) stepped every control
-    step fly the same kite bit for bit: the agent decides at the episode's first step and every fifth after it."""
+    step fly the same kite bit for bit: the agent decides (evaluates its network) at the episode's first step and
+    every fifth after it."""
     k, decisions = 5, 40
     trained = HeldAction(KiteFigureEightEnv(overrides=FAST), k)
     obs, _ = trained.reset(seed=3)
@@ -39,7 +40,8 @@ def test_a_held_action_agent_flies_as_it_was_trained():
         rewards.append(r)
         assert not (term or trunc)
     env = KiteFigureEightEnv(overrides=FAST)
-    agent = ModelAgent(_Decider(), None, action_hold=k)
+    decider = _Decider()
+    agent = ModelAgent(decider, None, action_hold=k)
     obs2, _ = env.reset(seed=3)
     actions, per_step = [], []
     for step in range(k * decisions):
@@ -49,6 +51,7 @@ def test_a_held_action_agent_flies_as_it_was_trained():
         per_step.append(r)
     np.testing.assert_array_equal(obs2, obs)
     np.testing.assert_allclose(np.add.reduceat(per_step, np.arange(0, k * decisions, k)), rewards, rtol=1e-12)
+    assert decider.calls == decisions  # the network is evaluated once per decision, not at every step
     held = np.asarray(actions).reshape(decisions, k)
     assert np.all(held == held[:, :1]) and len(set(held[:, 0])) > 1
     # a new episode starts a new decision at its first step
