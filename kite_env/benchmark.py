@@ -196,3 +196,20 @@ def bench_batched(n_kites: int = 64, n_steps: int = 1000, overrides=(), seed: in
     env.close()
     return {"n_kites": n_kites, "kite_steps_per_s": n_kites * n_steps / wall, "steps": n_steps,
             "real_time_factor": wall / (n_kites * n_steps * control_dt)}
+
+
+def warm_kernels(fidelity: str) -> float:
+    """Compile the numba kernels that ``fidelity`` (``fe``, ``surrogate`` or ``batched``) flies with into numba's
+    on-disk cache (:mod:`kite_env.compiled`) by a short turbulent flight; returns the wall time [s]. A later process
+    loads the cache instead of compiling (a cold full model costs about 30 s of compilation per process on the 2-core
+    development machine, the fast fidelity as much again): the test command runs this once per fidelity, in parallel
+    with the type check, before its workers start."""
+    t0 = time.perf_counter()
+    turbulent = ["wind.turbulence_intensity=0.1"]
+    if fidelity == "batched":
+        bench_batched(n_kites=2, n_steps=3, overrides=turbulent)
+    elif fidelity in ("fe", "surrogate"):
+        bench_env(n_steps=3, overrides=turbulent, fidelity=fidelity)
+    else:
+        raise ValueError(f"fidelity must be fe, surrogate or batched, got {fidelity!r}")
+    return time.perf_counter() - t0

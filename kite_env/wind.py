@@ -53,7 +53,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from kite_env.compiled import BACKENDS, NUMBA_AVAILABLE, njit  # without numba the NumPy path is used
+from kite_env.compiled import njit, resolve_backend  # without numba the NumPy path is used
 
 PROFILES = ("uniform", "log", "power")
 K1_MIN = 0.02  # lowest longitudinal wavenumber of the turbulence modes, times L [-]
@@ -182,7 +182,8 @@ class WindField:
     backend : {"auto", "numba", "numpy"}
         How the turbulence modes are summed: ``"numpy"`` is the reference (``np.cos`` in float64), ``"numba"`` a
         compiled loop with a polynomial cosine (agrees with the reference to ~1e-14 of the amplitudes, about 4x
-        faster at 10 points), ``"auto"`` = numba when it can be imported.
+        faster at 10 points), ``"auto"`` as every compiled kernel (:func:`kite_env.compiled.resolve_backend`: the
+        environment variable ``KITE_ENV_ELEMENT_BACKEND`` if set, else numba when it can be imported).
     """
 
     def __init__(self, cfg: WindConfig, seed: int | None = None, backend: str = "auto") -> None:
@@ -191,11 +192,7 @@ class WindField:
         cfg.validate()
         if seed is not None and (int(seed) != seed or seed < 0):
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-        if backend == "numba" and not NUMBA_AVAILABLE:
-            raise ValueError("backend 'numba' requested but numba cannot be imported")
-        self.backend = "numba" if backend == "auto" and NUMBA_AVAILABLE else ("numpy" if backend == "auto" else backend)
+        self.backend = resolve_backend(backend)
         self.cfg = cfg
         self.seed = int(cfg.seed if seed is None else seed)
         self.sigma = cfg.turbulence_intensity * cfg.speed_mps  # target std of every component [m/s]

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from kite_env.wind import NUMBA_AVAILABLE, WindConfig, WindField, von_karman_spectra
+from kite_env.compiled import NUMBA_AVAILABLE
+from kite_env.wind import WindConfig, WindField, von_karman_spectra
 
 POS = np.array([[0.0, 0.0, 10.0], [30.0, -12.0, 45.0], [70.0, 25.0, 40.0], [-5.0, 3.0, 0.05]])
 
@@ -154,12 +155,20 @@ def test_field_argument_validation():
         WindField(WindConfig(), backend="cuda")
 
 
+def test_auto_backend_is_the_packages_choice(monkeypatch):
+    """The wind's ``"auto"`` backend follows the one rule of the package (kite_env.compiled.resolve_backend)."""
+    monkeypatch.setenv("KITE_ENV_ELEMENT_BACKEND", "numpy")
+    assert WindField(WindConfig()).backend == "numpy"
+    monkeypatch.delenv("KITE_ENV_ELEMENT_BACKEND")
+    assert WindField(WindConfig()).backend == ("numba" if NUMBA_AVAILABLE else "numpy")
+
+
 def test_numba_and_numpy_backends_agree():
     cfg = WindConfig(speed_mps=6.0, profile="log", turbulence_intensity=0.12, gust_speed_mps=1.0,
                      gust_start_s=0.0, gust_duration_s=10.0)
     ref = WindField(cfg, backend="numpy")
     if not NUMBA_AVAILABLE:
-        with pytest.raises(ValueError, match="numba"):
+        with pytest.raises(ImportError, match="numba"):
             WindField(cfg, backend="numba")
         return
     fast = WindField(cfg, backend="numba")

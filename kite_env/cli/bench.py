@@ -6,6 +6,7 @@
     kite-bench soak --fidelity surrogate|fe|batched --episodes N [--seed 0] [--duration 30] [--jobs 1]
                [--set section.key=value ...] --out DIR
     kite-bench soak --merge DIR [DIR ...] --out DIR
+    kite-bench warm [--fidelity fe|surrogate|batched ...]
 
 Prints a table and writes ``DIR/bench.json`` as ``{"fe": {"env_steps_per_s": ..., "real_time_factor": ...},
 "surrogate": {...}, "batched": {"n_kites": 64, "kite_steps_per_s": ...}}`` (``fe``: the aeroelastic FE wing;
@@ -24,6 +25,10 @@ the paper's 5.3 ms step) at several mesh resolutions, prints a table and writes 
 (:mod:`kite_env.soak`), writes ``DIR/soak.json`` and ``DIR/soak.md`` and prints the table; ``--merge`` joins soaks
 flown in parts over disjoint seeds into one. Exit status 0 when no step was non-finite and nothing raised, 1
 otherwise, 2 for bad input (nothing written).
+
+``kite-bench warm`` compiles the numba kernels of each fidelity into numba's on-disk cache by a short flight
+(:func:`kite_env.benchmark.warm_kernels`), so that the processes after it load them instead of compiling; the test
+command runs it before its workers start.
 """
 
 from __future__ import annotations
@@ -42,9 +47,12 @@ def main(argv=None) -> int:
         return soak(argv[1:])
     if argv[:1] == ["wing"]:
         return wing(argv[1:])
+    if argv[:1] == ["warm"]:
+        return warm(argv[1:])
     p = argparse.ArgumentParser(prog="kite-bench", description=__doc__.split("\n\n")[0],
                                 epilog="subcommands: 'kite-bench wing --help' (the static wing), 'kite-bench soak "
-                                "--help' (random-action episodes, every step checked)")
+                                "--help' (random-action episodes, every step checked), 'kite-bench warm --help' "
+                                "(compile the kernels into the cache)")
     p.add_argument("--out", required=True, help="folder for bench.json")
     p.add_argument("--steps", type=int, default=150, help="env steps of the fe fidelity (default 150 = 3 s of flight)")
     p.add_argument("--fast-steps", type=int, default=3000,
@@ -86,6 +94,22 @@ def main(argv=None) -> int:
                   + newton)
     write_json(args.out, "bench.json", result)
     print(f"kite-bench: wrote {args.out}/bench.json")
+    return 0
+
+
+def warm(argv) -> int:
+    """``kite-bench warm``: compile the kernels of each fidelity into numba's cache (module docstring)."""
+    from kite_env.benchmark import warm_kernels
+
+    p = argparse.ArgumentParser(prog="kite-bench warm", description="Compile the numba kernels of each fidelity into "
+                                "numba's on-disk cache by a short flight, so that later processes load them.")
+    p.add_argument("--fidelity", action="append", choices=("fe", "surrogate", "batched"), default=None,
+                   help="warm only these (repeatable; default all)")
+    args = parse_or_status(p, argv)
+    if isinstance(args, int):
+        return args
+    for fidelity in args.fidelity or ["fe", "surrogate", "batched"]:
+        print(f"kite-bench warm: {fidelity} {warm_kernels(fidelity):.1f} s", flush=True)
     return 0
 
 

@@ -56,3 +56,14 @@ def test_kite_bench_wing_times_each_resolution_and_refuses_bad_input(tmp_path, c
         assert bench.main(["wing", "--out", str(tmp_path / "x"), *argv]) == 2, argv
         assert capsys.readouterr().err.startswith("kite-bench wing: error: ")
     assert not (tmp_path / "x").exists()
+
+
+def test_kite_bench_warm_flies_each_fidelity_it_is_given_and_refuses_an_unknown_one(capsys):
+    """``kite-bench warm`` (run by the test command before its workers start) flies the fidelities it is given and
+    names each with its wall time; an unknown fidelity is exit 2."""
+    assert bench.main(["warm", "--fidelity", "surrogate", "--fidelity", "batched"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[2] for ln in lines] == ["surrogate", "batched"]
+    assert all(ln.startswith("kite-bench warm: ") and ln.endswith(" s") for ln in lines)
+    assert bench.main(["warm", "--fidelity", "rigid"]) == 2
+    assert "invalid choice: 'rigid'" in capsys.readouterr().err

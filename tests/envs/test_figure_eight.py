@@ -242,30 +242,37 @@ def test_observation_terms_are_configurable():
 def test_baseline_through_the_env_flies_a_whole_figure_eight_and_beats_random_and_straight():
     """One evaluation path: the paper's controller via predict() against random steering and dl* = 0 at the paper's
     conditions. Over 22 s (one whole figure-eight of about 18.5 s after the start) the baseline flies to the time
-    limit, tracks the path within 5 deg RMS (measured 3.6 deg over 60 s) and earns more return than either; flying
-    straight leaves the figure and ends on the ground or far from the path."""
+    limit and tracks the path within 5 deg RMS (measured 2.5 deg). Random steering and flying straight leave the
+    figure at once (10-15 deg RMS from it after 4 s, the baseline 0.9 deg), so they are flown over the first 6 s
+    only, and the baseline's return over those same 6 s is larger than either's and its distance from the path
+    smaller. (Flown on for 22 s, both spend a minute of wall time each off the figure: measured returns 150 and 234
+    against the baseline's 1,865.)"""
+    window_s = 6.0
+
     def run(policy, seed=0, horizon_s=22.0):
         env = KiteFigureEightEnv(overrides=[f"env.max_episode_s={horizon_s}"])
         obs, _ = env.reset(seed=seed)
-        start, ret, dist = True, 0.0, []
+        start, rewards, dist = True, [], []
         while True:
             a, _ = policy(obs, start)
             start = False
             obs, r, term, trunc, info = env.step(a)
-            ret += r
+            rewards.append(r)
             dist.append(info["path_distance_deg"])
             if term or trunc:
-                return ret, float(np.sqrt(np.mean(np.square(dist)))), info["termination_reason"]
+                n = int(round(window_s / env.control_dt))
+                return (info["termination_reason"], float(np.sqrt(np.mean(np.square(dist)))),
+                        float(np.sum(rewards[:n])), float(np.sqrt(np.mean(np.square(dist[:n])))))
 
     agent = BaselineAgent(KiteFigureEightEnv().cfg)
     rng = np.random.default_rng(5)
     base = run(lambda o, s: agent.predict(o, episode_start=s))
-    rand = run(lambda o, s: (rng.uniform(-1, 1, 1).astype(np.float32), None))
-    zero = run(lambda o, s: (np.zeros(1, np.float32), None))
-    assert base[2] == "time limit"
+    rand = run(lambda o, s: (rng.uniform(-1, 1, 1).astype(np.float32), None), horizon_s=window_s)
+    zero = run(lambda o, s: (np.zeros(1, np.float32), None), horizon_s=window_s)
+    assert base[0] == "time limit"
     assert base[1] < 5.0
-    assert base[0] > rand[0] and base[0] > zero[0]
-    assert base[1] < zero[1]
+    assert base[2] > rand[2] and base[2] > zero[2]
+    assert base[3] < rand[3] and base[3] < zero[3]
 
 
 def test_randomized_start_speed_can_scale_with_the_drawn_wind():
