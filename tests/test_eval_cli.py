@@ -282,6 +282,35 @@ def test_episodes_give_rows_and_the_compare_table(real_run, tmp_path):
     assert len(rows) == 4 and rows[0].startswith("policy,episodes,crashed,end,episode_return_mean,episode_return_se")
 
 
+def test_run_folders_joined_by_plus_are_one_column_and_traction_is_paired_by_seed(real_run, tmp_path, capsys):
+    """One policy flown in parts (seeds 3 and 4 in two runs) pooled into one column by ``A+B``: the same episodes as
+    one run of two episodes, so its paired traction difference from that run is 0 over 2 pairs; parts of another
+    policy, another configuration or a repeated seed are refused (exit 2, nothing written)."""
+    _, _, first = real_run
+    short = ["--duration", "0.15", "--set", "sim.warmup_s=0.05", "--quiet"]
+
+    def fly(name, seed, *extra, policy="constant:0", episodes=1):
+        out = tmp_path / name
+        assert main(["--policy", policy, "--episodes", str(episodes), "--seed", str(seed), "--out", str(out),
+                     *short, *extra]) == 0
+        return str(out)
+
+    whole, a, b = fly("whole", 3, episodes=2), fly("a", 3), fly("b", 4)
+    out = tmp_path / "cmp"
+    assert main(["--compare", whole, f"{a}+{b}", "--out", str(out), "--quiet"]) == 0
+    md = (out / "compare.md").read_text().strip().splitlines()
+    assert md[0] == "| | whole | a+1 |"
+    body = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in md[2:]}
+    assert body["episodes"] == ["2", "2"] and body["return"][0] == body["return"][1]
+    assert body["traction vs whole, paired by seed [%]"] == ["-", "+0.00 +- 0 (2 pairs)"]
+    capsys.readouterr()
+    for parts, why in (([a, a], "repeat a seed"), ([a, str(first)], "one column pools one policy"),
+                       ([a, fly("windy", 4, "--set", "wind.speed_mps=6")], "different configurations (")):
+        bad = tmp_path / "bad"
+        assert main(["--compare", whole, "+".join(parts), "--out", str(bad), "--quiet"]) == 2
+        assert why in capsys.readouterr().err and not bad.exists()
+
+
 def test_a_random_episode_does_not_depend_on_the_episodes_before_it():
     """RandomAgent is reseeded with each episode's seed by run_episode: episode 1 of a run is the episode flown
     alone with its seed (kite-eval end-reasons flies each episode alone, by seed)."""

@@ -32,7 +32,11 @@ A run writes into ``--out``:
 
 ``--compare A B ...`` evaluates each policy (or reads an existing ``kite-eval`` run folder) into ``OUT/<name>/`` and
 writes ``OUT/compare.md`` and ``OUT/compare.csv``: the policies side by side (return, crashes, tracking, traction,
-figure-eights, L/D, speed).
+figure-eights, L/D, speed), each column the mean +- standard error over its episodes, and for every column after the
+first the paired difference of its mean traction from the first column's over the episodes of the same turbulence
+seed. Run folders joined by ``+`` (``runs/sac_a+runs/sac_b``) are one column: the episodes of one policy flown in
+parts (other seeds, other sessions or machines) pooled, refused unless the parts flew the same policy in the same
+configuration (but for the seed) on distinct seeds.
 
 ``kite-eval end-reasons`` counts why randomised episodes end (:func:`kite_env.evaluation.end_reasons`): the
 episodes of ``kite-eval --randomize`` (by default winds 4-10 m/s, turbulence up to 0.15 and starts anywhere on the
@@ -215,8 +219,10 @@ def _publish(tmp: Path, out: Path) -> None:
 class _Job:
     """One policy to evaluate (or an existing run folder to read): its name, spec, config, env and agent."""
 
-    def __init__(self, spec: str, label: str, cfg=None, env=None, agent=None, run_dir: Path | None = None):
+    def __init__(self, spec: str, label: str, cfg=None, env=None, agent=None, run_dir: Path | None = None,
+                 pooled: dict | None = None):
         self.spec, self.label, self.cfg, self.env, self.agent, self.run_dir = spec, label, cfg, env, agent, run_dir
+        self.pooled = pooled  # the metrics of run folders joined by '+' (pool_runs)
 
 
 def _prepare(spec: str, args, overrides: list[str], label: str) -> _Job:
@@ -328,10 +334,61 @@ def compare_table(results: list[tuple[str, dict]], header: str = "") -> tuple[st
         cols.append(col)
         csv_rows.append(row)
     names = [name for name, _ in results]
+    paired = f"traction vs {names[0]}, paired by seed [%]" if len(results) > 1 else None
+    if paired:
+        first = _traction_by_seed(results[0][1])
+        for col, row, (_, m) in zip(cols, csv_rows, results):
+            mine = _traction_by_seed(m)
+            diffs = [100.0 * (mine[k] / first[k] - 1.0) for k in sorted(mine) if k in first and first[k] > 0]
+            mu, se = mean_se(diffs)
+            col[paired] = "-" if mu is None or m is results[0][1] else (
+                f"{mu:+.2f} +- {se:.2g} ({len(diffs)} pairs)" if len(diffs) > 1 else f"{mu:+.2f} (1 pair)")
+            row["traction_paired_pct_mean"], row["traction_paired_pct_se"], row["traction_pairs"] = mu, se, len(diffs)
     lines = ([header, ""] if header else []) + ["| | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
-    for label in ["episodes", "crashed", "end", *[r[0] for r in COMPARE_ROWS]]:
+    for label in ["episodes", "crashed", "end", *[r[0] for r in COMPARE_ROWS], *([paired] if paired else [])]:
         lines.append(f"| {label} | " + " | ".join(c[label] for c in cols) + " |")
     return "\n".join(lines) + "\n", csv_rows
+
+
+def _traction_by_seed(metrics: dict) -> dict:
+    """Mean tether force [N] of each episode of a run (also one that ended early), by its turbulence seed."""
+    rows = metrics.get("episode_rows") or [metrics]
+    return {int(r["wind_seed"]): float(r["tether_force_mean_N"]) for r in rows
+            if r.get("wind_seed") is not None and r.get("tether_force_mean_N") is not None}
+
+
+def pool_runs(folders: list[Path]) -> dict:
+    """The ``metrics.json`` of the ``kite-eval`` run folders ``folders`` (one policy flown in parts) as one run: the
+    first folder's metrics with the episode rows of all. Raises ValueError unless every part flew the same policy in
+    the same configuration but for ``wind.seed`` and no turbulence seed repeats."""
+    import yaml
+
+    def read(folder: Path) -> tuple[dict, dict]:
+        for name in ("metrics.json", "config.yaml"):
+            if not (folder / name).is_file():
+                raise ValueError(f"--compare: folder {str(folder)!r} has no {name} (not a kite-eval run)")
+        cfg = yaml.safe_load((folder / "config.yaml").read_text())
+        cfg.get("wind", {}).pop("seed", None)
+        return json.loads((folder / "metrics.json").read_text()), cfg
+
+    base, cfg0 = read(folders[0])
+    rows = list(base.get("episode_rows") or [base])
+    for folder in folders[1:]:
+        m, cfg = read(folder)
+        if m.get("policy") != base.get("policy"):
+            raise ValueError(f"--compare: {str(folder)!r} flew policy {m.get('policy')!r}, {str(folders[0])!r} "
+                             f"{base.get('policy')!r}: one column pools one policy")
+        differ = sorted(f"{sec}.{k}" for sec in set(cfg) | set(cfg0)
+                        for k in set(cfg.get(sec) or {}) | set(cfg0.get(sec) or {})
+                        if (cfg.get(sec) or {}).get(k) != (cfg0.get(sec) or {}).get(k))
+        if differ:
+            raise ValueError(f"--compare: {str(folder)!r} and {str(folders[0])!r} flew different configurations "
+                             f"({', '.join(differ[:5])}{' ...' if len(differ) > 5 else ''})")
+        rows += list(m.get("episode_rows") or [m])
+    seeds = [r.get("wind_seed") for r in rows]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"--compare: the parts {'+'.join(map(str, folders))} repeat a seed ({sorted(seeds)})")
+    return {**base, "episode_rows": rows, **_episode_stats(rows)}
 
 
 def _labels(specs: list[str]) -> list[str]:
@@ -339,8 +396,10 @@ def _labels(specs: list[str]) -> list[str]:
 
     out: list[str] = []
     for spec in specs:
-        p = Path(spec)
-        base = p.name if p.is_dir() and spec not in SHIPPED else policy_label(spec)
+        p = Path(spec.split("+")[0])
+        pooled = "+" in spec and all(Path(q).is_dir() for q in spec.split("+"))
+        base = (p.name + (f"+{spec.count('+')}" if pooled else "") if p.is_dir() and spec not in SHIPPED
+                else policy_label(spec))
         label, k = base, 2
         while label in out:
             label, k = f"{base}_{k}", k + 1
@@ -377,7 +436,10 @@ def main(argv=None) -> int:
     try:
         for spec, label in zip(specs, _labels(specs)):
             run = Path(spec)
-            if args.compare and run.is_dir() and spec not in SHIPPED:  # the names ppo, sac: the shipped models
+            parts = [Path(p) for p in spec.split("+")] if args.compare and "+" in spec else []
+            if parts and all(p.is_dir() for p in parts):  # one policy's episodes flown in parts, pooled
+                jobs.append(_Job(spec, label, run_dir=parts[0], pooled=pool_runs(parts)))
+            elif args.compare and run.is_dir() and spec not in SHIPPED:  # the names ppo, sac: the shipped models
                 if not (run / "metrics.json").is_file():
                     return _fail(f"--compare: folder {spec!r} has no metrics.json (not a kite-eval run)")
                 jobs.append(_Job(spec, label, run_dir=run))
@@ -423,7 +485,7 @@ def main(argv=None) -> int:
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the result folder gets the usual permissions
         for job in jobs:
             if job.run_dir is not None:
-                results.append((job.label, json.loads((job.run_dir / "metrics.json").read_text())))
+                results.append((job.label, job.pooled or json.loads((job.run_dir / "metrics.json").read_text())))
                 continue
             log, metrics, rows = _evaluate(job, args, progress)
             done[0] += job.cfg.env.max_episode_s * args.episodes
