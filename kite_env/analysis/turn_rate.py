@@ -391,16 +391,16 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     the nodes' translations, the rotations condensed statically (the nodes' rotary inertia does not change the
     rig's response, docs/steering.md, "The open-loop turn rate").
 
-    ``K``: the structure's tangent and the step's external stiffness (:meth:`_StepLoad.operators`: the section loads
+    ``K``: the structure's tangent and the step's external stiffness (:meth:`StepLoad.operators`: the section loads
     at the held inflow, the bridle lines). ``M``: the nodal mass blocks with the added mass. ``D = -df/dv`` by
-    central differences (``h_mps``) of the step's own force law (:class:`_StepLoad`, built at each velocity state):
+    central differences (``h_mps``) of the step's own force law (:class:`StepLoad`, built at each velocity state):
     the section loads see the wing's rigid translation through the inflow (``u_ref``, their force and moment alike),
     the deviation from it through the section damping, plus the bridle lines' and the structural damping and
     Theodorsen's normal-rate force with ``n' = (dn/dx) v``.
     ``rigid_inflow=False`` gives the operators' damping ``C`` instead (the Newton tangent's, which applies the
     section damping to all of the velocity: the rigid translation's response is then the sections' forces at their
     3/4-chord points, symmetric part projected onto the positive semi-definite cone, without the moment of Eq. 9)."""
-    from kite_env.dynamics.wing_dynamics import _StepLoad
+    from kite_env.dynamics.wing_dynamics import StepLoad
 
     dyn, kcu, rest, flight = _tethered_wing_rig(cfg, airspeed_mps, alpha_rad, settle_s)
     wing = dyn.wing
@@ -418,7 +418,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
 
     def load_at(v):
         dyn.v = v
-        ld = _StepLoad(dyn, dt, kcu, zero3, rest, zero3, flight.v_wind)
+        ld = StepLoad(dyn, dt, kcu, zero3, rest, zero3, flight.v_wind)
         ld.x_pred, ld.v_pred = st.x, v  # a = 0 at the iterate st, v the velocities
         return ld
 
@@ -441,7 +441,7 @@ def tethered_wing_modes(cfg: Config, airspeed_mps: float = 30.0, alpha_rad: floa
     if rigid_inflow:
         D = np.zeros((t.size, t.size))
         normal_rate = dyn.section_added_mass is not None
-        n0 = dyn._section_frames(st.x).e_z if normal_rate else None
+        n0 = dyn.section_frames(st.x).e_z if normal_rate else None
         eps = 1e-6  # [s] the normal's rate (dn/dx) v by a forward difference of the shape
 
         def f(v):

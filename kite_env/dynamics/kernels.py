@@ -537,7 +537,7 @@ def kcu_line_force(r_b, v_b, r_k, v_k, wind, rest, k_c, c_c, drag_coef, eps, out
 
 @njit(**JIT)
 def wing_bridle_lines(x_b, v_b, r_k, v_k, v_wind, rest, k_c, c_c, drag_coef, eps, e, l, T, dT, drag):
-    """The bridle lines at the wing's ends A-D (:meth:`kite_env.dynamics.wing_dynamics._StepLoad._lines` and the
+    """The bridle lines at the wing's ends A-D (:meth:`kite_env.dynamics.wing_dynamics.StepLoad._lines` and the
     drag that ``force`` adds, compiled: a Newton iterate's NumPy calls on four lines cost more than the arithmetic).
     Into ``e`` (4, 3) the unit vectors KCU -> A-D, ``l`` (4,) [m] the lengths, ``T``, ``dT`` (4,) the smoothed
     pull-only tension of Eq. (10) and its derivative (:func:`kite_env.dynamics.lines.line_tension`, width

@@ -23,7 +23,7 @@ the wing has mass and moves:
   added mass acts along its normal ``e_z`` and is lumped on its nodes by their chordwise tributary length. Its
   force is ``M_a a`` plus the part of Theodorsen's non-circulatory load that ``M_a a`` misses
   (:meth:`WingDynamics.normal_rate_force`).
-* **Aerodynamics of a moving wing** (:class:`_StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
+* **Aerodynamics of a moving wing** (:class:`StepLoad`): the loads of Eq. 2-9 at the iterate's shape with the
   inflow of the wing's rigid *translation* (the mass-weighted fit of its velocities at the step's start), plus the
   damping of each section's deviation from it, rotation and deformation together, through the consistent section damping
   (docs/model.md, "Aerodynamic damping"; ``W^T C W`` with the velocity sampled at the 3/4-chord point, Pistolesi's
@@ -103,9 +103,10 @@ def added_mass(mesh, geometry, rho: float, factor: float, aspect_ratio: float) -
     return factor * k_c * rho * np.pi * geometry.chord**2 * np.asarray(mesh.section_width, float) / 4.0
 
 
-class _StepLoad:
+class StepLoad:
     """External and inertial forces of one generalized-alpha step as a function of the Newton iterate (the load
-    protocol of :meth:`StaticSolver.solve`).
+    protocol of :meth:`StaticSolver.solve`). Public for the linearisations of :mod:`kite_env.analysis.turn_rate`,
+    which build it at chosen velocity states.
 
     Section loads (the quasi-steady split of the consistent section damping, now with the wing's own motion): the
     loads of Eq. (2-9) at the iterate's shape with the inflow of the wing's rigid translation ``u_ref`` (the
@@ -458,7 +459,7 @@ class WingDynamics:
         if np.any(self._tt_blocks < 0):
             raise RuntimeError("the wing's tangent pattern has a partial translation block")
         # the tip rods, a set of their own with the wing's properties: their tangents correct a kept factorisation
-        # (_StepLoad.tangent_change)
+        # (StepLoad.tangent_change)
         tip = np.flatnonzero(np.asarray(mesh.beam_kind) == BEAM_TIP)
         self.tip_rods = None
         if tip.size:
@@ -574,7 +575,7 @@ class WingDynamics:
         c = self.tip_rods.conn
         return self.tip_rods.internal(st.x[c], st.Rn[c], tangent=True)[1]
 
-    def _section_frames(self, x: np.ndarray):
+    def section_frames(self, x: np.ndarray):
         """The sections' geometry (frames ``e_x``, ``e_z``, ...) at the nodal positions ``x`` (n_nodes, 3)."""
         mesh = self.wing.mesh
         return self._frames_of(x[mesh.sections], mesh.section_tube_d, mesh.section_width)
@@ -599,7 +600,7 @@ class WingDynamics:
         if f > 0.0:
             x = self.state.x if x is None else x
             x_sec = x[mesh.sections]
-            geom = self._section_frames(x)
+            geom = self.section_frames(x)
             m_a = added_mass(mesh, geom, wing.cfg.aero.rho_kg_m3, f, wing.aspect_ratio)
             seg = np.linalg.norm(np.diff(x_sec, axis=1), axis=2)
             trib = np.zeros(mesh.sections.shape)
@@ -691,7 +692,7 @@ class WingDynamics:
             held_rep, xs.reshape(-1, m, 3), rep(v[sec]), v_wind, rep(mesh.section_tube_d), rep(mesh.section_width),
             spanwise=rep(spanwise_directions(x_sec[:, 0]))).reshape(2, p, n_sec, p)
         K = (-(f[0] - f[1]) / (2.0 * h)).transpose(1, 2, 0)  # (n_sec, 3 m (force), 3 m (coordinate))
-        n1 = self._section_frames(x).e_z
+        n1 = self.section_frames(x).e_z
         n_dot = (n1 - n0) / dt
         W = self.section_weights(x[sec], "three_quarter_chord")
         C = (m_a[:, None, None, None, None] * W[:, :, None, None, None] * W[:, None, None, :, None]
@@ -713,7 +714,7 @@ class WingDynamics:
         self.w = np.zeros_like(self.v)  # (the start's load: no rotation over its "step")
         self.aw = np.zeros_like(self.v)
         self.update_mass()
-        load = _StepLoad(self, 1.0, r_kcu, v_kcu, rest, g_K, v_wind)
+        load = StepLoad(self, 1.0, r_kcu, v_kcu, rest, g_K, v_wind)
         load.x_pred = self.state.x  # a = 0 at the iterate, v = v_nodes
         load.v_pred = self.v
         load.force(self.state)
@@ -763,10 +764,10 @@ class WingDynamics:
         pred = start = self._predict(dt)
         self.update_mass(start.x)
 
-        def step_load() -> _StepLoad:
-            ld = _StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=pred)
+        def step_load() -> StepLoad:
+            ld = StepLoad(self, dt, r_kcu, v_kcu, rest, g_K, v_wind, at=pred)
             if self.section_added_mass is not None:
-                ld.normal_rate = (self._section_frames(self.state.x).e_z, self.section_added_mass, dt)
+                ld.normal_rate = (self.section_frames(self.state.x).e_z, self.section_added_mass, dt)
             return ld
 
         load = step_load()

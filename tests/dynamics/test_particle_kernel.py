@@ -267,7 +267,7 @@ def test_kcu_line_force_matches_the_numpy_lines(seed):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_wing_bridle_lines_match_the_numpy_lines(seed):
     """wing_bridle_lines (the wing with inertia's lines at every Newton iterate) = the NumPy path of
-    ``_StepLoad._lines``: unit vectors, lengths, the smoothed pull-only tension of Eq. (10) and its derivative, and
+    ``StepLoad._lines``: unit vectors, lengths, the smoothed pull-only tension of Eq. (10) and its derivative, and
     the wing end's half of Eq. (11)'s drag with the lines' mean velocity, to round-off; one line slack and one
     stretched, so that both branches of the tension law are taken."""
     from kite_env.dynamics.kernels import wing_bridle_lines

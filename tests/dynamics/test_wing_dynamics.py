@@ -14,7 +14,7 @@ from kite_env.config import Config, ConfigError, config_from_dict
 from kite_env.dynamics.dynamic_simulator import DynamicFlightSimulator
 from kite_env.dynamics.factory import make_simulator
 from kite_env.dynamics.lines import line_tension
-from kite_env.dynamics.wing_dynamics import AlphaParameters, WingDynamics, _StepLoad
+from kite_env.dynamics.wing_dynamics import AlphaParameters, StepLoad, WingDynamics
 from kite_env.dynamics.wing_mass import nodal_wing_mass
 from kite_env.fsi import WingConvergenceError, nominal_wing
 from kite_env.structure.rotations import logm
@@ -75,7 +75,7 @@ def _step_load(sim):
     st = sim.state
     g_K = R.T @ np.array([0.0, 0.0, -9.81])
     d.update_mass()
-    return _StepLoad(d, sim.dt, R.T @ (st.r[4] - origin), R.T @ st.v[4], sim.particles.rest, g_K,
+    return StepLoad(d, sim.dt, R.T @ (st.r[4] - origin), R.T @ st.v[4], sim.particles.rest, g_K,
                      R.T @ sim.wind.velocity(0.0, origin[None, :])[0])
 
 
@@ -658,7 +658,7 @@ def test_the_held_rayleigh_tangent_keeps_the_flight_and_its_newton_iterations():
 
 def test_the_tip_rod_correction_saves_newton_iterations_and_leaves_the_flight(monkeypatch):
     """The baseline's first second with and without the correction of a kept factorisation for the tip rods
-    (``_StepLoad.tangent_change``): fewer Newton iterations per step; with Newton converged tightly (1e-6 of the
+    (``StepLoad.tangent_change``): fewer Newton iterations per step; with Newton converged tightly (1e-6 of the
     load) the same flight. (At the default tolerance, 1e-3, the two differ within it: 1.4 cm after 1.5 s.) Over this
     second 1.52 against 1.92 iterations per step (the residual dropped); carrying all of each step's residual
     into the next (``structure.carry_residual=full``) 1.78 against 2.02. The Rayleigh damping's tangent is assembled
@@ -673,7 +673,7 @@ def test_the_tip_rod_correction_saves_newton_iterations_and_leaves_the_flight(mo
     runs = {}
     for corrected in (True, False):
         if not corrected:
-            monkeypatch.setattr(_StepLoad, "tangent_change", lambda self, st, snapshot: None)
+            monkeypatch.setattr(StepLoad, "tangent_change", lambda self, st, snapshot: None)
         for tol in (1e-3, 1e-6):
             cfg = dataclasses.replace(base, structure=dataclasses.replace(base.structure, dynamic=True,
                                                                           rayleigh_tangent_period_s=0.0),
@@ -910,7 +910,7 @@ def test_in_a_steady_turn_the_added_mass_exerts_no_force_on_a_section():
     d.a = d.v @ W.T  # w x (w x (x - c))
     assert np.abs(d.v[:, 0]).mean() == pytest.approx(30.0, rel=0.05)
     d.update_mass(x1)
-    n0 = d._section_frames(x0.x).e_z
+    n0 = d.section_frames(x0.x).e_z
     f = d.normal_rate_force((n0, d.section_added_mass, dt), x1, (x1 - c) @ W.T, np.zeros(3))
     a1 = ((x1 - c) @ W.T) @ W.T
     M_a = d.M_blocks - d.m_node[:, None, None] * np.eye(3)[None]
@@ -937,7 +937,7 @@ def test_the_compiled_normal_rate_force_equals_the_numpy_reference():
     x0 = wing.unloaded_state().x
     x1 = x0 + 0.03 * rng.standard_normal(x0.shape)
     d.update_mass(x1)
-    held = (d._section_frames(x0).e_z, d.section_added_mass, 2.5e-3)
+    held = (d.section_frames(x0).e_z, d.section_added_mass, 2.5e-3)
     v = np.array([-25.0, 1.0, 3.0]) + 4.0 * rng.standard_normal(x1.shape)
     v_wind = np.array([2.0, -0.5, 0.3])
     mesh = wing.mesh
@@ -968,7 +968,7 @@ def test_the_normal_rate_forces_tangent_matches_finite_differences():
     d.state = NodalState(x1.copy(), wing.unloaded_state().Rn)
     d.update_mass(x1)
     dt = 3.125e-4
-    held = (d._section_frames(x0).e_z, d.section_added_mass, dt)
+    held = (d.section_frames(x0).e_z, d.section_added_mass, dt)
     v = np.array([-20.0, 0.0, 2.0]) + 3.0 * rng.standard_normal(x1.shape)
     v_wind = np.array([1.0, 0.5, 0.0])
     Kb, Cb = d.normal_rate_tangent(held, x1, v, v_wind)
