@@ -436,7 +436,7 @@ class WingDynamics:
         rows = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None]) + np.zeros((1, 1, 3), np.int64)
         cols = (6 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 3, 1), np.int64)
         self.node_blocks = np.asarray(idx[rows.ravel(), cols.ravel()]).ravel().astype(np.int64).reshape(n, 3, 3) - 1
-        self.used_nodes = np.flatnonzero(asm._node_used)
+        self.used_nodes = np.flatnonzero(asm.node_used)
         # rotary inertia of the nodes (structural mass without the point masses on A-D)
         self.J_node = cfg.structure.rotary_inertia_factor * nodal_rotary_inertia(mesh, m_spread)
         self.has_rotary_inertia = bool(np.any(self.J_node > 0.0))
@@ -493,7 +493,7 @@ class WingDynamics:
         if self.energy_consistent_membrane:  # scatter maps of the canopy's translations (membrane_force, ..._tangent_)
             sh = wing.shells
             self._shell_dofs = (6 * sh.conn[:, :, None] + np.arange(3)[None, None, :]).reshape(-1)
-            shell_map = asm._set_maps[[i for i, es in enumerate(asm.sets) if es is sh][0]].reshape(-1, 18, 18)
+            shell_map = asm.set_maps[[i for i, es in enumerate(asm.sets) if es is sh][0]].reshape(-1, 18, 18)
             tr = (6 * np.arange(3)[:, None] + np.arange(3)[None, :]).ravel()  # translations of the element's 18 DOF
             self._shell_tt = shell_map[:, tr][:, :, tr]  # (n, 9, 9) pattern positions of the membrane's blocks
 

@@ -86,21 +86,23 @@ class Assembler:
         n_el = inv.size - self.n_dof - n_extra
         self._map = inv[:n_el]  # position of each element-matrix entry in the CSC data
         sizes = np.cumsum([0] + [d.shape[0] * d.shape[1] ** 2 for d in self._dofs])
-        self._set_maps = [self._map[a:b] for a, b in zip(sizes[:-1], sizes[1:])]
+        # per element set, where each of its element-matrix entries lands in the CSC data (read by the wing with
+        # inertia to add its shells' blocks of another matrix into the same pattern)
+        self.set_maps = [self._map[a:b] for a, b in zip(sizes[:-1], sizes[1:])]
         self._set_dofs = [d.ravel() for d in self._dofs]
         self._scatter = _numba_scatter()
         self._extra_map = inv[n_el: n_el + n_extra]
         self.diag_index = inv[n_el + n_extra:]  # position of the diagonal entry (i, i) in the CSC data
         self.indices = (uniq % self.n_dof).astype(np.int32)
         self.indptr = np.searchsorted(uniq // self.n_dof, np.arange(self.n_dof + 1)).astype(np.int32)
-        self._node_used = np.zeros(self.n_nodes, bool)
+        self.node_used = np.zeros(self.n_nodes, bool)  # nodes of some element (the others' DOF have no stiffness)
         for s in self.sets:
-            self._node_used[np.asarray(s.conn).ravel()] = True
+            self.node_used[np.asarray(s.conn).ravel()] = True
 
     @property
     def unused_nodes(self) -> np.ndarray:
         """Indices of nodes that belong to no element (their DOF have no stiffness)."""
-        return np.flatnonzero(~self._node_used)
+        return np.flatnonzero(~self.node_used)
 
     def block_data(self, blocks: np.ndarray) -> np.ndarray:
         """Pattern data (length ``nnz``) of the ``extra_blocks`` matrices ``(n_b, 3 n_bn, 3 n_bn)``."""
@@ -134,7 +136,7 @@ class Assembler:
         """As :meth:`assemble`, with the tangent as its CSC data vector (length ``nnz``; None without tangent)."""
         f_int = np.zeros(self.n_dof)
         data = np.zeros(self.nnz) if tangent else None
-        for s, dofs, kmap in zip(self.sets, self._set_dofs, self._set_maps):
+        for s, dofs, kmap in zip(self.sets, self._set_dofs, self.set_maps):
             conn = s.conn
             f_e, K_e = s.internal(x[conn], Rn[conn], tangent=tangent)
             if self._scatter is not None:

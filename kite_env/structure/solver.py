@@ -182,7 +182,7 @@ class StaticSolver:
         self._lu_data = None  # tangent (pattern data, incl. load tangent) of the current factorisation
         self._lu_free = None
         self.n_factorizations = 0  # counter over the solver's lifetime
-        self.auto_fixed = np.flatnonzero(np.repeat(~assembler._node_used, DOF_PER_NODE))
+        self.auto_fixed = np.flatnonzero(np.repeat(~assembler.node_used, DOF_PER_NODE))
 
     def _reduced(self, fixed: np.ndarray):
         key = fixed.tobytes()
