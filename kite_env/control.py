@@ -81,9 +81,18 @@ class LineActuator:
         """The force loop over one controller period: ``(L3, mu)``, the common increment of both steering-line rest
         lengths [m] (Eq. 19 plus the integral term) and the force ratio of Eq. (18); advances the integral."""
         cfg = self.cfg
-        mu, err = force_ratio_error(line_tension, cfg.mu_target)
-        self.integral = force_integral(self.integral, float(err), cfg)
-        return -cfg.k3_m * float(err) - cfg.k3i_per_s * self.integral, float(mu)  # Eq. (19), plus the integral
+        T0, T1, T2, T3 = _four_floats(line_tension)
+        # force_ratio_error and force_integral in float arithmetic (one actuator per step of the single env, where
+        # NumPy's per-call cost on 0-d values was most of the controller's time); the same operations, bit for bit
+        power = T0 + T2
+        mu = (T1 + T3) / power if power >= POWER_LINES_MIN_N else float(cfg.mu_target)
+        err = cfg.mu_target - mu
+        if cfg.k3i_per_s <= 0.0:
+            self.integral = self.integral * 0.0
+        else:
+            lim = cfg.force_integral_max_m / cfg.k3i_per_s
+            self.integral = _clip(self.integral + err * cfg.control_dt_s, -lim, lim)
+        return -cfg.k3_m * err - cfg.k3i_per_s * self.integral, mu  # Eq. (19), plus the integral
 
     def rest_lengths(self, delta_l_star: float, line_length: np.ndarray, line_tension: np.ndarray):
         """Rest lengths ``(L_B, L_D)`` [m] and a dict with ``delta_l``, ``mu``, ``L3``.
@@ -94,16 +103,42 @@ class LineActuator:
         period's rest lengths at most at ``control.line_speed_max_mps`` (:func:`actuate`).
         """
         cfg = self.cfg
-        dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
-        l = np.asarray(line_length, dtype=float)
-        dl = float(l[1] - l[3])  # Delta l = l_B - l_D (Sect. III.A)
+        if type(delta_l_star) is float:
+            dls = _clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m)
+        else:  # a NumPy value clips in its own precision
+            dls = float(np.clip(delta_l_star, -cfg.delta_l_max_m, cfg.delta_l_max_m))
+        _, l1, _, l3 = _four_floats(line_length)
+        dl = l1 - l3  # Delta l = l_B - l_D (Sect. III.A)
         L3, mu = self.force_increment(line_tension)
         e = dls - dl
         L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
         L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
-        L_B, L_D = (float(v) for v in actuate(L_B, L_D, self.last[0], self.last[1], cfg))
+        if cfg.line_speed_max_mps > 0.0:  # actuate() in float arithmetic
+            step = cfg.line_speed_max_mps * cfg.control_dt_s
+            L_B_prev, L_D_prev = self.last
+            c_prev, d_prev = 0.5 * (L_B_prev + L_D_prev), 0.5 * (L_B_prev - L_D_prev)
+            c = _clip(0.5 * (L_B + L_D), c_prev - step, c_prev + step)
+            d = _clip(0.5 * (L_B - L_D), d_prev - step, d_prev + step)
+            L_B, L_D = c + d, c - d
         self.last = (L_B, L_D)
         return L_B, L_D, {"delta_l": dl, "delta_l_star": dls, "mu": mu, "L3": L3}
+
+
+def _four_floats(x) -> list[float]:
+    """The four values of the lines A, B, C, D as Python floats (``x`` a (4,) array or sequence)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1:
+        return x.tolist()
+    return np.asarray(x, dtype=float).reshape(-1).tolist()
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``float(np.clip(x, lo, hi))`` of floats, NumPy's rules included: NaN propagates from ``x`` and from either
+    bound, ``x`` equal to ``lo`` gives ``x`` and equal to ``hi`` gives ``x`` (the sign of a zero kept as NumPy keeps
+    it on 0-d values; tests/dynamics/test_control.py compares the two)."""
+    m = x if (x != x or x >= lo) else lo
+    if m != m:
+        return m
+    return hi if (hi != hi or hi < m) else m
 
 
 def actuate(L_B, L_D, L_B_prev, L_D_prev, cfg: ControlConfig):

@@ -39,10 +39,9 @@ _TERM_SPECS = {
 }
 #: an episode ends as crashed when the KCU comes closer to the ground than this elevation [rad]
 GROUND_ELEVATION_RAD = math.radians(3.0)
-V_SCALE_MPS = 25.0  # (literal 25.0 in kite_env.envs.observe.observe_kites)
+V_SCALE_MPS = 25.0  # (literal 25.0 in kite_env.envs.observe._observe_kite)
 #: the features of ``info`` (all of :data:`kite_env.envs.observe.FEATURES` but the last, ``tracking``)
 INFO_FEATURES = FEATURES[:-1]
-_ONE = np.ones(1, dtype=np.bool_)
 
 
 def slack_tether_ends(cfg) -> bool:
@@ -58,7 +57,7 @@ def reward_terms(env, tracking, tether_N, a, last_a, failed):
     ``env`` : EnvConfig; ``tracking`` exp(-(delta/scale)^2); ``tether_N`` [N]; ``a``, ``last_a`` this and the
     previous action; ``failed`` a physical failure (bool). Returns the dict of the four ``reward_*`` terms."""
     d = a - last_a
-    if np.ndim(failed) == 0:
+    if type(failed) is bool or np.ndim(failed) == 0:
         return {"reward_tracking": 0.0 if failed else env.w_tracking * tracking,
                 "reward_traction": 0.0 if failed else env.w_traction * tether_N / env.traction_ref_N,
                 "reward_action": -env.w_action_rate * (d * d),
@@ -228,12 +227,16 @@ class KiteFigureEightEnv(gym.Env):
         #: optional :class:`kite_env.flight.FlightRecorder`: gets every physics step (kite-eval's time series)
         self.recorder = None
         self.rec: StepRecord | None = None
-        self._trail: list[np.ndarray] = []
+        #: KCU positions [x, y, z] [m] after each step, for the drawing (normalised there)
+        self._trail: list[list[float]] = []
         self._fig: Figure | None = None
         self._observer = Observer(cfg, self.path, self.layout)
-        self._obs_buf = {"hint": np.zeros(1), "act": np.zeros(1), "tether": np.zeros(1), "t": np.zeros(1),
-                         "parts": np.zeros((1, N_PARTS)), "feats": np.zeros((1, len(FEATURES)))}
+        # the observer's outputs, reused by every step
+        self._parts, self._feats = np.zeros(N_PARTS), np.zeros(len(FEATURES))
+        self._n_obs = len(self._observer.index)
+        self._kcu: list[float] = []  # KCU position [m] of ``rec``
         self._tracking = 0.0
+        self._slack_ends = slack_tether_ends(cfg)
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -290,7 +293,8 @@ class KiteFigureEightEnv(gym.Env):
         self.substepped_steps = 0  # physics steps split because the wing failed at the full step (sim.step)
         self.episode_info = {"wind_speed_mps": wind_speed, "turbulence_intensity": ti, "wind_seed": wind_seed,
                              "start_s": s0, "initial_speed_mps": v0, "failed_starts": failed_starts}
-        self._trail = [self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4])]
+        self._kcu = self.rec.state.r[4].tolist()
+        self._trail = [self._kcu]
         if self.recorder is not None:
             self.recorder.start(self.sim, self.rec, s0, self.L_B, self.L_D,
                                 LineActuator.force_ratio(self.rec.line_tension))
@@ -319,37 +323,47 @@ class KiteFigureEightEnv(gym.Env):
     def step(self, action):
         if self.rec is None:
             raise RuntimeError("call reset() before step()")
-        assert self.sim is not None  # built with the first record
-        arr = np.asarray(action, dtype=np.float64).reshape(-1)
-        if arr.size != 1:
-            raise ValueError(f"action must have one element, got shape {np.shape(action)}")
-        a = float(arr[0])
+        sim = self.sim
+        assert sim is not None  # built with the first record
+        if type(action) is np.ndarray and action.size == 1 and action.dtype.kind == "f":
+            a = float(action.item())  # a float's float64 value, as np.asarray(action, dtype=np.float64) gives it
+        elif type(action) is float:
+            a = action
+        else:
+            arr = np.asarray(action, dtype=np.float64).reshape(-1)
+            if arr.size != 1:
+                raise ValueError(f"action must have one element, got shape {np.shape(action)}")
+            a = float(arr[0])
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {a!r}")
         a = min(1.0, max(-1.0, a))
         cfg = self.cfg
         dl_star = a * cfg.control.delta_l_max_m
-        self.L_B, self.L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
+        L_B, L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
+        self.L_B, self.L_D = L_B, L_D
         reason = detail = None
         # a slack tether ends the episode on a rod; the default rope goes slack and flies on (the quasi-static wing's
         # tether is always the rod)
-        slack_ends = slack_tether_ends(cfg)
+        slack_ends = self._slack_ends
+        recorder = self.recorder
         newton = []  # Newton iterations of each physics step's FE wing (none from the surrogate)
         for _ in range(self.n_physics):
-            t0 = time.perf_counter()
+            t0 = time.perf_counter() if recorder is not None else 0.0
             try:
-                rec = self.sim.step(self.L_B, self.L_D)
+                rec = sim.step(L_B, L_D)
             except SimulationError as exc:
                 if self._failure_raises():  # the wing with inertia: a bug, not an end
-                    raise NumericalFailure(exc, self.sim.t, self._conditions()) from exc
+                    raise NumericalFailure(exc, sim.t, self._conditions()) from exc
                 reason, detail = exc.reason, exc.detail
                 break
             self.rec = rec
-            if self.sim.fidelity_now == "fe":
+            if sim.fidelity_now == "fe":
                 newton.append(int(rec.wing.newton_iters))
-            if self.recorder is not None:
-                self.recorder.record(rec, self.L_B, self.L_D, ainfo, time.perf_counter() - t0)
-            x, y, z = (float(c) for c in rec.state.r[4])
+            if recorder is not None:
+                recorder.record(rec, L_B, L_D, ainfo, time.perf_counter() - t0)
+            kcu = rec.state.r[4].tolist()
+            self._kcu = kcu
+            x, y, z = kcu
             self.substepped_steps += rec.substeps > 1
             if z < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(x * x + y * y + z * z):  # the batch: the same sums
                 reason = "ground"
@@ -359,26 +373,32 @@ class KiteFigureEightEnv(gym.Env):
                 break
         self.steps += 1
         prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied
-        obs, feats = self._observe(self.rec)
-        if reason is None and not np.all(np.isfinite(obs)):
+        obs, feats, finite = self._observe_finite(self.rec)
+        if reason is None and not finite:
             if self._failure_raises():
-                raise NumericalFailure(SimulationError("non-finite state", f"observation {obs}"), self.sim.t,
+                raise NumericalFailure(SimulationError("non-finite state", f"observation {obs}"), sim.t,
                                        self._conditions())
             reason = "non-finite state"
         terms = reward_terms(cfg.env, self._tracking, feats["tether_force_N"], a, prev_action, reason is not None)
         reward = float(sum(terms.values()))
         terminated = reason is not None
         truncated = (not terminated) and self.steps >= self.max_steps
-        obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
-        obs = np.clip(obs, self.observation_space.low, self.observation_space.high)
-        info = {**terms, **feats, "delta_l_star_m": ainfo["delta_l_star"], "L_B_m": self.L_B, "L_D_m": self.L_D,
-                "termination_reason": reason if terminated else ("time limit" if truncated else None),
-                "fidelity": self.sim.fidelity_now, "substepped_steps": self.substepped_steps}
+        if not finite:
+            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+        obs = obs.clip(self.observation_space.low, self.observation_space.high)  # np.clip's own call
+        info = terms
+        info.update(feats)
+        info["delta_l_star_m"] = ainfo["delta_l_star"]
+        info["L_B_m"] = L_B
+        info["L_D_m"] = L_D
+        info["termination_reason"] = reason if terminated else ("time limit" if truncated else None)
+        info["fidelity"] = sim.fidelity_now
+        info["substepped_steps"] = self.substepped_steps
         if newton:
             info["newton_iters"] = newton
         if detail:
             info["termination_detail"] = detail
-        self._trail.append(self.rec.state.r[4] / np.linalg.norm(self.rec.state.r[4]))
+        self._trail.append(self._kcu)
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, truncated, info
@@ -387,20 +407,20 @@ class KiteFigureEightEnv(gym.Env):
     def _observe(self, rec: StepRecord):
         """Observation (float32, unclipped) and features of the record ``rec`` (:mod:`kite_env.envs.observe`);
         advances the nearest-point hint ``s_hint``. The features include ``tracking`` = exp(-(delta/scale)^2)."""
-        buf = self._obs_buf
-        buf["hint"][0] = self.s_hint
-        buf["act"][0] = self.last_action
-        buf["tether"][0] = rec.tether_force
-        buf["t"][0] = rec.t
-        parts, feats = buf["parts"], buf["feats"]
-        self._observer(_ONE, rec.state.r[4:5], rec.state.v[4:5], rec.R_wk[None], rec.omega[None], rec.v_kite[None],
-                       rec.line_tension[None], rec.line_length[None], buf["tether"], buf["t"], buf["hint"],
-                       buf["act"], parts, feats)
-        self.s_hint = float(buf["hint"][0])
-        obs = parts[0, self._observer.index].astype(np.float32)
-        vals = feats[0].tolist()
+        obs, feats, _ = self._observe_finite(rec)
+        return obs, feats
+
+    def _observe_finite(self, rec: StepRecord):
+        """:meth:`_observe` and whether the observation is finite."""
+        obs = np.empty(self._n_obs, dtype=np.float32)
+        # the scalars as float64 values, as the batch's arrays hold them
+        self.s_hint, finite = self._observer.one(
+            rec.state.r, rec.state.v, rec.R_wk, rec.omega, rec.v_kite, rec.line_tension, rec.line_length,
+            float(rec.tether_force), float(rec.t), float(self.s_hint), float(self.last_action), self._parts,
+            self._feats, obs)
+        vals = self._feats.tolist()
         self._tracking = vals[-1]
-        return obs, dict(zip(INFO_FEATURES, vals))
+        return obs, dict(zip(INFO_FEATURES, vals)), finite
 
     # ------------------------------------------------------------------ rendering
     def render(self):
@@ -434,7 +454,7 @@ class KiteFigureEightEnv(gym.Env):
         assert self.sim is not None and self.rec is not None  # render() checks that reset() was called
         s = np.linspace(0.0, 2.0 * math.pi, 400)
         P = self.path.point(s)
-        trail = np.asarray(self._trail)
+        trail = np.array([np.asarray(r) / np.linalg.norm(r) for r in self._trail])
         ax = fig.add_subplot(1, 2, 1)
         ax.plot(np.degrees(np.arctan2(P[:, 1], P[:, 0])), np.degrees(np.arcsin(P[:, 2])), "k--", lw=0.8)
         ax.plot(np.degrees(np.arctan2(trail[:, 1], trail[:, 0])), np.degrees(np.arcsin(trail[:, 2])), "C0", lw=1.2)

@@ -1,6 +1,8 @@
 """Compiled observation of the figure-eight task for ``n`` kites (used by the single and the batched environment).
 
-:func:`observe_kites` computes, per kite, what :meth:`KiteFigureEightEnv._observe` needs: the observation terms of
+:func:`observe_kites` computes, per kite (:func:`_observe_kite`; the single env calls it through :func:`observe_one`,
+which takes its step record's arrays as they are and gathers the observation), what
+:meth:`KiteFigureEightEnv._observe` needs: the observation terms of
 :data:`TERMS` in their canonical order (the env selects its ``env.observation`` terms from them) and the features of
 :data:`FEATURES` that the reward and ``info`` use. It includes the nearest point of the figure-eight, the algorithm of
 :meth:`kite_env.trajectory.Lemniscate.nearest` step by step: the windowed argmax of ``R . p`` over the precomputed
@@ -191,6 +193,50 @@ def _wrap(x):
 
 
 @njit(**JIT)
+def _observe_kite(x0, x1, x2, u0, u1, u2, nose0, nose1, nose2, zk0, zk1, zk2, om0, om1, om2, vk0, vk1, vk2, T0, T1,
+                  T2, T3, l_B, l_D, tether, t, s_hint, last_action, samples, s_samples, window, ds, a, b, rot,
+                  force_scale, dl_max, tracking_scale, m, c, q, f):
+    """One kite of :func:`observe_kites` from its values: KCU position ``x`` and velocity ``u``, the nose ``-x_k``
+    and ``z_k`` of frame K, ``omega``, ``v_kite``, the tensions ``T0..T3`` and the lengths of the lines B and D, the
+    tether force, ``t``, the hint and the last action (all in W). Writes the terms ``q`` (22,) and the features ``f``
+    (13,); returns the nearest path parameter (the next hint). ``m``, ``c`` (3, 3): scratch."""
+    n_r = math.sqrt(x0 ** 2 + x1 ** 2 + x2 ** 2)
+    R0, R1, R2 = x0 / n_r, x1 / n_r, x2 / n_r
+    psi = _heading(R0, R1, R2, nose0, nose1, nose2)
+    s, dist, p0, p1, p2, t0, t1, t2, n0, n1, n2 = nearest_point(R0, R1, R2, s_hint, samples, s_samples, window, ds,
+                                                               a, b, rot, m, c)
+    l0, l1, l2 = p1 * t2 - p2 * t1, p2 * t0 - p0 * t2, p0 * t1 - p1 * t0
+    signed = -dist * math.copysign(1.0, n0 * l0 + n1 * l1 + n2 * l2)
+    psi_t = _heading(p0, p1, p2, t0, t1, t2)
+    dpsi = _wrap(psi_t - psi)
+    xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(R0, R1, R2)  # with its own re-normalisation, as sphere_basis
+    vr = u0 * R0 + u1 * R1 + u2 * R2
+    w0 = (u0 - vr * R0) / n_r  # angular rate on the unit sphere (n_r = l_t, also while reeling)
+    w1 = (u1 - vr * R1) / n_r
+    w2 = (u2 - vr * R2) / n_r
+    yaw = zk0 * om0 + zk1 * om1 + zk2 * om2
+    speed = math.sqrt(vk0 ** 2 + vk1 ** 2 + vk2 ** 2)
+    mu = (T1 + T3) / max(T0 + T2, 1e-9)  # Eq. (18), LineActuator.force_ratio
+    dl = l_B - l_D
+    tf = tether if math.isfinite(tether) else (((T0 + T1) + T2) + T3)
+    q[0], q[1], q[2] = R0, R1, R2
+    q[3], q[4] = math.sin(psi), math.cos(psi)
+    q[5], q[6], q[7], q[8], q[9] = T0 / force_scale, T1 / force_scale, T2 / force_scale, T3 / force_scale, \
+        tf / force_scale
+    q[10], q[11], q[12], q[13], q[14] = signed, math.sin(dpsi), math.cos(dpsi), math.sin(s), math.cos(s)
+    q[15] = w0 * xs0 + w1 * xs1 + w2 * xs2
+    q[16] = w0 * ys0 + w1 * ys1 + w2 * ys2
+    q[17], q[18] = yaw, speed / 25.0  # V_SCALE_MPS
+    q[19], q[20], q[21] = last_action, dl / dl_max, mu
+    f[0], f[1], f[2], f[3] = t, dist, dist * _RAD2DEG, s
+    f[4], f[5], f[6], f[7], f[8], f[9] = tf, speed, psi, yaw, mu, dl
+    f[10] = math.atan2(R2, math.hypot(R0, R1)) * _RAD2DEG
+    f[11] = math.atan2(R1, R0) * _RAD2DEG
+    f[12] = math.exp(-((dist / tracking_scale) * (dist / tracking_scale)))
+    return s
+
+
+@njit(**JIT)
 def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action,
                   samples, s_samples, window, ds, a, b, rot, force_scale, dl_max, tracking_scale,
                   parts, feats):
@@ -218,43 +264,37 @@ def observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, te
     for k in range(r_kcu.shape[0]):
         if not active[k]:
             continue
-        n_r = math.sqrt(r_kcu[k, 0] ** 2 + r_kcu[k, 1] ** 2 + r_kcu[k, 2] ** 2)
-        R0, R1, R2 = r_kcu[k, 0] / n_r, r_kcu[k, 1] / n_r, r_kcu[k, 2] / n_r
-        psi = _heading(R0, R1, R2, -R_wk[k, 0, 0], -R_wk[k, 1, 0], -R_wk[k, 2, 0])  # nose -x_k
-        s, dist, p0, p1, p2, t0, t1, t2, n0, n1, n2 = nearest_point(R0, R1, R2, s_hint[k], samples, s_samples,
-                                                                   window, ds, a, b, rot, m, c)
-        s_hint[k] = s
-        l0, l1, l2 = p1 * t2 - p2 * t1, p2 * t0 - p0 * t2, p0 * t1 - p1 * t0
-        signed = -dist * math.copysign(1.0, n0 * l0 + n1 * l1 + n2 * l2)
-        psi_t = _heading(p0, p1, p2, t0, t1, t2)
-        dpsi = _wrap(psi_t - psi)
-        xs0, xs1, xs2, ys0, ys1, ys2 = _sphere_basis(R0, R1, R2)  # with its own re-normalisation, as sphere_basis
-        vr = v_kcu[k, 0] * R0 + v_kcu[k, 1] * R1 + v_kcu[k, 2] * R2
-        w0 = (v_kcu[k, 0] - vr * R0) / n_r  # angular rate on the unit sphere (n_r = l_t, also while reeling)
-        w1 = (v_kcu[k, 1] - vr * R1) / n_r
-        w2 = (v_kcu[k, 2] - vr * R2) / n_r
-        yaw = R_wk[k, 0, 2] * omega[k, 0] + R_wk[k, 1, 2] * omega[k, 1] + R_wk[k, 2, 2] * omega[k, 2]
-        speed = math.sqrt(v_kite[k, 0] ** 2 + v_kite[k, 1] ** 2 + v_kite[k, 2] ** 2)
-        T0, T1, T2, T3 = tension[k, 0], tension[k, 1], tension[k, 2], tension[k, 3]
-        mu = (T1 + T3) / max(T0 + T2, 1e-9)  # Eq. (18), LineActuator.force_ratio
-        dl = length[k, 1] - length[k, 3]
-        tf = tether[k] if math.isfinite(tether[k]) else (((T0 + T1) + T2) + T3)
-        q = parts[k]
-        q[0], q[1], q[2] = R0, R1, R2
-        q[3], q[4] = math.sin(psi), math.cos(psi)
-        q[5], q[6], q[7], q[8], q[9] = T0 / force_scale, T1 / force_scale, T2 / force_scale, T3 / force_scale, \
-            tf / force_scale
-        q[10], q[11], q[12], q[13], q[14] = signed, math.sin(dpsi), math.cos(dpsi), math.sin(s), math.cos(s)
-        q[15] = w0 * xs0 + w1 * xs1 + w2 * xs2
-        q[16] = w0 * ys0 + w1 * ys1 + w2 * ys2
-        q[17], q[18] = yaw, speed / 25.0  # V_SCALE_MPS
-        q[19], q[20], q[21] = last_action[k], dl / dl_max, mu
-        f = feats[k]
-        f[0], f[1], f[2], f[3] = t[k], dist, dist * _RAD2DEG, s
-        f[4], f[5], f[6], f[7], f[8], f[9] = tf, speed, psi, yaw, mu, dl
-        f[10] = math.atan2(R2, math.hypot(R0, R1)) * _RAD2DEG
-        f[11] = math.atan2(R1, R0) * _RAD2DEG
-        f[12] = math.exp(-((dist / tracking_scale) * (dist / tracking_scale)))
+        s_hint[k] = _observe_kite(r_kcu[k, 0], r_kcu[k, 1], r_kcu[k, 2], v_kcu[k, 0], v_kcu[k, 1], v_kcu[k, 2],
+                                  -R_wk[k, 0, 0], -R_wk[k, 1, 0], -R_wk[k, 2, 0], R_wk[k, 0, 2], R_wk[k, 1, 2],
+                                  R_wk[k, 2, 2], omega[k, 0], omega[k, 1], omega[k, 2], v_kite[k, 0], v_kite[k, 1],
+                                  v_kite[k, 2], tension[k, 0], tension[k, 1], tension[k, 2], tension[k, 3],
+                                  length[k, 1], length[k, 3], tether[k], t[k], s_hint[k], last_action[k], samples,
+                                  s_samples, window, ds, a, b, rot, force_scale, dl_max, tracking_scale, m, c,
+                                  parts[k], feats[k])
+
+
+@njit(**JIT)
+def observe_one(r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, samples, s_samples,
+                window, ds, a, b, rot, force_scale, dl_max, tracking_scale, index, parts, feats, obs):
+    """:func:`observe_kites` of one kite from the arrays of its step record (the single env), with the observation
+    gathered: ``r``, ``v`` (5, 3) the masses (KCU last), ``R_wk`` (3, 3), ``omega``, ``v_kite`` (3,), ``tension``,
+    ``length`` (4,), floats ``tether``, ``t``, ``s_hint``, ``last_action``; the path and scales as there. Writes
+    ``parts`` (22,), ``feats`` (13,) and ``obs[i] = float32(parts[index[i]])``; returns the new hint and whether
+    every entry of ``obs`` is finite (the same values as a batch of one: one code per kite)."""
+    m = np.empty((3, 3))
+    c = np.empty((3, 3))
+    s = _observe_kite(r[4, 0], r[4, 1], r[4, 2], v[4, 0], v[4, 1], v[4, 2], -R_wk[0, 0], -R_wk[1, 0], -R_wk[2, 0],
+                      R_wk[0, 2], R_wk[1, 2], R_wk[2, 2], omega[0], omega[1], omega[2], v_kite[0], v_kite[1],
+                      v_kite[2], tension[0], tension[1], tension[2], tension[3], length[1], length[3], tether, t,
+                      s_hint, last_action, samples, s_samples, window, ds, a, b, rot, force_scale, dl_max,
+                      tracking_scale, m, c, parts, feats)
+    finite = True
+    for i in range(index.shape[0]):
+        x = np.float32(parts[index[i]])
+        obs[i] = x
+        if not math.isfinite(x):
+            finite = False
+    return s, finite
 
 
 # ---------------------------------------------------------------------------------------------------- wrapper
@@ -284,3 +324,8 @@ class Observer:
         """:func:`observe_kites` with this path and these scales (arguments as there)."""
         observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action,
                       *self._consts, parts, feats)
+
+    def one(self, r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, parts, feats, obs):
+        """:func:`observe_one` with this path, these scales and the observation's ``index`` (arguments as there)."""
+        return observe_one(r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, *self._consts,
+                           self.index, parts, feats, obs)

@@ -1,0 +1,100 @@
+"""The single env's float arithmetic against the NumPy forms it stands in for, bit for bit: the actuator
+(``LineActuator.rest_lengths`` against ``force_ratio_error``, ``force_integral`` and ``actuate``, the batched env's
+forms), NumPy's clip rules, the action's conversion and the one-kite observation kernel against the batch's."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from kite_env.config import ControlConfig
+from kite_env.control import LineActuator, _clip, actuate, force_integral, force_ratio_error
+from kite_env.envs.figure_eight import KiteFigureEightEnv
+from kite_env.envs.observe import FEATURES, N_PARTS
+
+_EDGES = [-0.0, 0.0, 1.0, -1.0, 0.5, math.nan, math.inf, -math.inf, 2.0, -2.0]
+
+
+def _same(x: float, y: float) -> bool:
+    """Equal bit for bit (NaN equals NaN; the sign of a zero counts)."""
+    return (math.isnan(x) and math.isnan(y)) or (x == y and math.copysign(1.0, x) == math.copysign(1.0, y))
+
+
+def test_clip_of_floats_is_numpys_clip():
+    for x, lo, hi in itertools.product(_EDGES, repeat=3):
+        assert _same(_clip(x, lo, hi), float(np.clip(x, lo, hi))), (x, lo, hi)
+
+
+@pytest.mark.parametrize("changes", [{}, {"line_speed_max_mps": 0.0}, {"k3i_per_s": 0.0},
+                                     {"force_integral_max_m": 0.0}])
+def test_actuator_is_the_array_forms_bit_for_bit(changes):
+    """Random lengths and tensions (power lines loaded and unloaded, NaN) over many periods: the rest lengths,
+    the integral and the reported values equal those of the array forms of the batched env."""
+    cfg = dataclasses.replace(ControlConfig(), **changes)
+    act = LineActuator(cfg, 25.2, 25.3)
+    integral, last = 0.0, (25.2, 25.3)
+    rng = np.random.default_rng(1)
+    for i in range(3000):
+        lengths = 25.2 + rng.normal(0.0, 0.3, 4)
+        T = rng.uniform(0.0, 3000.0, 4) * rng.choice([0.01, 1.0], 4)
+        if i >= 2990:  # NaN stays in the integral: the last periods
+            T[rng.integers(4)] = np.nan
+        dls = float(rng.uniform(-2.0, 2.0)) if i % 3 else float(rng.choice([-1.5, 1.5, 0.0, -0.0]))
+        L_B, L_D, info = act.rest_lengths(dls, lengths, T)
+        # the reference: the NumPy forms, as rest_lengths composed them
+        dls_ref = float(np.clip(dls, -cfg.delta_l_max_m, cfg.delta_l_max_m))
+        dl = float(lengths[1] - lengths[3])
+        mu, err = force_ratio_error(T, cfg.mu_target)
+        integral = force_integral(integral, float(err), cfg)
+        L3 = -cfg.k3_m * float(err) - cfg.k3i_per_s * integral
+        e = dls_ref - dl
+        ref = actuate(25.2 + cfg.k2 * e + L3, 25.3 - cfg.k2 * e + L3, last[0], last[1], cfg)
+        last = tuple(float(v) for v in ref)
+        assert _same(L_B, last[0]) and _same(L_D, last[1]), i
+        assert _same(float(act.integral), float(integral)), i
+        for key, value in (("delta_l", dl), ("delta_l_star", dls_ref), ("mu", float(mu)), ("L3", L3)):
+            assert _same(info[key], value), (i, key)
+
+
+def test_actions_of_any_float_type_give_the_same_step():
+    """A float, a float32 or float64 array of any size-1 shape and a list step the env identically."""
+    rollouts = []
+    for kind in ("float", "f32", "f64", "f32_0d", "list"):
+        env = KiteFigureEightEnv(fidelity="surrogate")
+        env.reset(seed=3)
+        out = []
+        for i in range(20):
+            v = float(np.float32(0.7 * math.sin(0.3 * i)))
+            a = {"float": v, "f32": np.array([v], np.float32), "f64": np.array([[v]]),
+                 "f32_0d": np.array(v, np.float32), "list": [v]}[kind]
+            obs, reward, terminated, truncated, info = env.step(a)
+            out.append((obs.tobytes(), reward, terminated, truncated, sorted(info.items())))
+        rollouts.append(out)
+    assert all(r == rollouts[0] for r in rollouts[1:])
+
+
+def test_one_kite_observation_kernel_is_the_batch_of_one():
+    """The single env's observation kernel (observe_one) gives the batch kernel's (observe_kites) parts, features
+    and hint for the same record, and gathers the observation's terms."""
+    env = KiteFigureEightEnv(fidelity="surrogate", overrides=["env.observation=path,rates,position"])
+    env.reset(seed=0)
+    for _ in range(30):
+        env.step(np.array([0.3], np.float32))
+    rec = env.rec
+    assert rec is not None
+    hint = env.s_hint
+    parts, feats = np.zeros((1, N_PARTS)), np.zeros((1, len(FEATURES)))
+    s = np.array([hint])
+    env._observer(np.ones(1, dtype=np.bool_), rec.state.r[4:5], rec.state.v[4:5], rec.R_wk[None], rec.omega[None],
+                  rec.v_kite[None], rec.line_tension[None], rec.line_length[None], np.array([rec.tether_force]),
+                  np.array([rec.t]), s, np.array([env.last_action]), parts, feats)
+    obs, info = env._observe(rec)
+    assert env.s_hint == s[0]
+    np.testing.assert_array_equal(env._parts, parts[0])
+    np.testing.assert_array_equal(env._feats, feats[0])
+    np.testing.assert_array_equal(obs, parts[0, env._observer.index].astype(np.float32))
+    assert list(info.values()) == feats[0, :-1].tolist()
