@@ -39,6 +39,7 @@ _TERM_SPECS = {
 }
 #: an episode ends as crashed when the KCU comes closer to the ground than this elevation [rad]
 GROUND_ELEVATION_RAD = math.radians(3.0)
+_SIN_GROUND = math.sin(GROUND_ELEVATION_RAD)
 V_SCALE_MPS = 25.0  # (literal 25.0 in kite_env.envs.observe._observe_kite)
 #: the features of ``info`` (all of :data:`kite_env.envs.observe.FEATURES` but the last, ``tracking``)
 INFO_FEATURES = FEATURES[:-1]
@@ -365,7 +366,7 @@ class KiteFigureEightEnv(gym.Env):
             self._kcu = kcu
             x, y, z = kcu
             self.substepped_steps += rec.substeps > 1
-            if z < math.sin(GROUND_ELEVATION_RAD) * math.sqrt(x * x + y * y + z * z):  # the batch: the same sums
+            if z < _SIN_GROUND * math.sqrt(x * x + y * y + z * z):  # the batch: the same sums
                 reason = "ground"
                 break
             if slack_ends and rec.tether_force < cfg.env.slack_tether_N:
