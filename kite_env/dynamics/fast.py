@@ -897,7 +897,7 @@ class SurrogateFlightSimulator(FlightSimulator):
 
     fidelity_now = "surrogate"
 
-    def _start_wing(self, X):
+    def start_wing(self, X):
         """The start from the table; where the table has no converged cell (its grid points next to the query did not
         converge in the cold FE solve, or the query is outside the grid), solved with the FE wing, as the full
         model does (about 1 s; counted in :attr:`fe_starts`). With ``start="table_only"`` such a start fails
@@ -910,7 +910,7 @@ class SurrogateFlightSimulator(FlightSimulator):
                 if self.start_mode == "table_only":
                     raise SimulationError("no tabulated start", str(exc)) from None
         self.fe_starts += 1
-        return super()._start_wing(X)
+        return super().start_wing(X)
 
     def _record(self):
         ks = self.kites

@@ -160,7 +160,7 @@ class FlightSimulator:
         yp = np.cross(zp, xp)
         R_base = np.stack([xp, yp, zp], axis=1)
         X = FlightState(v_kite=R_base.T @ v0, omega=np.zeros(3), v_wind=R_base.T @ v_wind)
-        q0, F_b0, k_pairs = self._start_wing(X)
+        q0, F_b0, k_pairs = self.start_wing(X)
         kcu = wing.kcu_position()
         e_line = kcu - q0
         e_line /= np.linalg.norm(e_line, axis=1, keepdims=True)
@@ -195,7 +195,7 @@ class FlightSimulator:
             self.particles.set_wing_mass((1.0 - f) * M + f * np.diag(np.repeat(self.particles.m[:4], 3)))
         return rec
 
-    def _start_wing(self, X: FlightState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def start_wing(self, X: FlightState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The wing at the start: static equilibrium held by its bridle lines (tips free to move in y_k) at the
         flight state ``X`` (frame of the start, no rotation), so that the flight does not start with the unloaded
         design tip distance. Returns the bridle points ``q0`` (4, 3) [m] and forces ``F_b`` (4, 3) [N] in K and the

@@ -1,4 +1,4 @@
-"""The start table's build: the full model's start (:meth:`kite_env.dynamics.simulator.FlightSimulator._start_wing`)
+"""The start table's build: the full model's start (:meth:`kite_env.dynamics.simulator.FlightSimulator.start_wing`)
 run on a grid of apparent velocities (``kite-fit start-table``), stored as the reduced-order wing's
 :class:`~kite_env.surrogate.start.StartTable` (the table, its interpolation and its file live with the wing, below
 the dynamics; the fast fidelity's reset reads it).
@@ -27,7 +27,7 @@ class _NoWind:
 def start_state(cfg, s: float, w: float):
     """The full model's start at one grid point: a fresh :class:`FlightSimulator` (so that the result does not
     depend on earlier solves; the tip-pair stiffness's finite differences are sensitive to the solver's warm state),
-    the wing reset with the configured power-line length as in ``reset``, and ``_start_wing`` at
+    the wing reset with the configured power-line length as in ``reset``, and ``start_wing`` at
     ``v_app = (-s, 0, w)``. Returns ``(q0, F_b, k_pairs)``; raises ``SimulationError`` or
     :class:`~kite_env.fsi.WingConvergenceError` where the full model does not converge."""
     sim = FlightSimulator(cfg, _NoWind())
@@ -35,7 +35,7 @@ def start_state(cfg, s: float, w: float):
     sim.wing.reset()
     sim.wing.line_length_m = cfg.dynamics.power_line_length_m
     X = FlightState(v_kite=np.array([-float(s), 0.0, float(w)]), omega=np.zeros(3), v_wind=np.zeros(3))
-    return sim._start_wing(X)
+    return sim.start_wing(X)
 
 
 def build_start_table(cfg, s_values, w_values, log=None) -> StartTable:

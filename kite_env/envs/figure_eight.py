@@ -222,7 +222,8 @@ class KiteFigureEightEnv(gym.Env):
         self.control_dt = self.n_physics * cfg.physics_dt_s
         self.max_steps = int(math.ceil(cfg.env.max_episode_s / self.control_dt - 1e-9))
         ctrl = cfg.control if cfg.env.force_controller else dataclasses.replace(cfg.control, k3_m=0.0)
-        self._ctrl_cfg = ctrl
+        #: the control section the env flies (the force loop's gain zeroed where ``env.force_controller`` is false)
+        self.control_cfg = ctrl
         self.sim: FlightSimulator | None = None  # built on the first reset (the wing mesh is reused afterwards)
         self._wing = wing
         #: optional :class:`kite_env.flight.FlightRecorder`: gets every physics step (kite-eval's time series)
@@ -231,15 +232,22 @@ class KiteFigureEightEnv(gym.Env):
         #: KCU positions [x, y, z] [m] after each step, for the drawing (normalised there)
         self._trail: list[list[float]] = []
         self._fig: Figure | None = None
-        self._observer = Observer(cfg, self.path, self.layout)
+        #: the observation's compiled kernel with its layout (shared by the batched env)
+        self.observer = Observer(cfg, self.path, self.layout)
         # the observer's outputs, reused by every step
         self._parts, self._feats = np.zeros(N_PARTS), np.zeros(len(FEATURES))
-        self._n_obs = len(self._observer.index)
+        self._n_obs = len(self.observer.index)
         self._kcu: list[float] = []  # KCU position [m] of ``rec``
         self._tracking = 0.0
         self._slack_ends = slack_tether_ends(cfg)
 
     # ------------------------------------------------------------------ gymnasium API
+    def share_wing(self, wing) -> None:
+        """Build this env's simulator, at its first reset, on ``wing`` (a wing geometry another env already made:
+        the batched env's kites share one), unless it has a simulator or a wing already."""
+        if self.sim is None and self._wing is None:
+            self._wing = wing
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         env = self.cfg.env
@@ -286,7 +294,7 @@ class KiteFigureEightEnv(gym.Env):
         else:
             raise StartError(f"reset failed: the wing did not converge at the start ({last_error})")
         assert self.sim is not None and self.sim.L_B0 is not None and self.sim.L_D0 is not None  # set by the reset
-        self.actuator = LineActuator(self._ctrl_cfg, self.sim.L_B0, self.sim.L_D0)
+        self.actuator = LineActuator(self.control_cfg, self.sim.L_B0, self.sim.L_D0)
         self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
         self.s_hint = s0
         self.last_action = 0.0
@@ -415,7 +423,7 @@ class KiteFigureEightEnv(gym.Env):
         """:meth:`_observe` and whether the observation is finite."""
         obs = np.empty(self._n_obs, dtype=np.float32)
         # the scalars as float64 values, as the batch's arrays hold them
-        self.s_hint, finite = self._observer.one(
+        self.s_hint, finite = self.observer.one(
             rec.state.r, rec.state.v, rec.R_wk, rec.omega, rec.v_kite, rec.line_tension, rec.line_length,
             float(rec.tether_force), float(rec.t), float(self.s_hint), float(self.last_action), self._parts,
             self._feats, obs)

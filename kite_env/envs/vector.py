@@ -94,8 +94,8 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self.observation_space = batch_space(e0.observation_space, n)
         self.action_space = batch_space(e0.action_space, n)
         self.n_physics, self.control_dt, self.max_steps = e0.n_physics, e0.control_dt, e0.max_steps
-        self._ctrl = e0._ctrl_cfg
-        self._observer = e0._observer
+        self._ctrl = e0.control_cfg
+        self._observer = e0.observer
         self._low, self._high = e0.observation_space.low, e0.observation_space.high
         self._sin_ground = math.sin(GROUND_ELEVATION_RAD)  # ground contact: the KCU below 3 deg elevation
         self._slack_ends = slack_tether_ends(cfg)
@@ -120,8 +120,7 @@ class KiteFigureEightVectorEnv(VectorEnv):
         env = self.envs[i]
         if env.sim.start_mode == "table":  # the wing is geometry only: the kites not yet built share it
             for other in self.envs:
-                if other.sim is None and other._wing is None:
-                    other._wing = env.sim.wing
+                other.share_wing(env.sim.wing)
         one = env.sim.kites
         if self.kites is None:
             self.kites = SurrogateKites(self.cfg, env.sim.surrogate, one.q_design, one.tip_lengths, self.num_envs)

@@ -2,7 +2,7 @@
 
 The flight simulator's reset (:meth:`kite_env.dynamics.simulator.FlightSimulator.reset`) solves the FE wing
 statically, held by its bridle lines, at the start state X (no rotation) and takes from it the bridle points ``q0``
-(4, 3), their forces ``F_b`` (4, 3) and the tip-pair stiffness ``k_pairs`` (4,) (``_start_wing``). The fast
+(4, 3), their forces ``F_b`` (4, 3) and the tip-pair stiffness ``k_pairs`` (4,) (``start_wing``). The fast
 fidelity cannot run the FE wing at every reset, so :func:`kite_env.dynamics.start_table.build_start_table` runs
 exactly that path of the full model on a grid and :class:`StartTable` interpolates it.
 

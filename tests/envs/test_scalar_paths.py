@@ -89,12 +89,12 @@ def test_one_kite_observation_kernel_is_the_batch_of_one():
     hint = env.s_hint
     parts, feats = np.zeros((1, N_PARTS)), np.zeros((1, len(FEATURES)))
     s = np.array([hint])
-    env._observer(np.ones(1, dtype=np.bool_), rec.state.r[4:5], rec.state.v[4:5], rec.R_wk[None], rec.omega[None],
+    env.observer(np.ones(1, dtype=np.bool_), rec.state.r[4:5], rec.state.v[4:5], rec.R_wk[None], rec.omega[None],
                   rec.v_kite[None], rec.line_tension[None], rec.line_length[None], np.array([rec.tether_force]),
                   np.array([rec.t]), s, np.array([env.last_action]), parts, feats)
     obs, info = env._observe(rec)
     assert env.s_hint == s[0]
     np.testing.assert_array_equal(env._parts, parts[0])
     np.testing.assert_array_equal(env._feats, feats[0])
-    np.testing.assert_array_equal(obs, parts[0, env._observer.index].astype(np.float32))
+    np.testing.assert_array_equal(obs, parts[0, env.observer.index].astype(np.float32))
     assert list(info.values()) == feats[0, :-1].tolist()
