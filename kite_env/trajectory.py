@@ -56,7 +56,7 @@ import numpy as np
 from kite_env.frames import cross
 
 _TWO_PI = 2.0 * math.pi
-_HINT_WINDOW = 0.6  # half width of the search window around s_hint [rad of s]
+HINT_WINDOW = 0.6  # half width of the search window around s_hint [rad of s]
 
 
 # ---------------------------------------------------------------------------------------------- sphere helpers
@@ -368,10 +368,10 @@ class Lemniscate:
         self.azimuth = math.radians(cfg.azimuth_deg)
         self.a, self.b = solve_chart_parameters(math.radians(cfg.width_deg), math.radians(cfg.height_deg),
                                                 self.elevation)
-        self._rot = _rotation(self.elevation, self.azimuth)
+        self.rotation = _rotation(self.elevation, self.azimuth)
         n = cfg.n_samples
-        self._ds = _TWO_PI / n
-        self.s_samples = np.arange(n) * self._ds
+        self.ds = _TWO_PI / n
+        self.s_samples = np.arange(n) * self.ds
         self.samples = self.point(self.s_samples)  # (n, 3)
         # periodic trapezoid rule: spectrally accurate for the smooth periodic speed |dp/ds|
         s_q = np.linspace(0.0, _TWO_PI, 4096, endpoint=False)
@@ -381,7 +381,7 @@ class Lemniscate:
     # ------------------------------------------------------------------ curve
     def derivatives(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``p(s), dp/ds, d2p/ds2``, each (..., 3), for ``s`` (...) [rad]."""
-        return _curve(s, self.a, self.b, self._rot)
+        return _curve(s, self.a, self.b, self.rotation)
 
     def point(self, s: np.ndarray | float) -> np.ndarray:
         """Unit vectors on the path, ``s (...)`` -> ``(..., 3)``."""
@@ -453,12 +453,12 @@ class Lemniscate:
         if s_hint is None:
             i = int(np.argmax(dots))
         else:
-            w = int(_HINT_WINDOW / self._ds)
-            centre = int(round((float(s_hint) % _TWO_PI) / self._ds))
+            w = int(HINT_WINDOW / self.ds)
+            centre = int(round((float(s_hint) % _TWO_PI) / self.ds))
             idx = (centre + np.arange(-w, w + 1)) % n
             i = int(idx[np.argmax(dots[idx])])
         s = self._refine(R, float(self.s_samples[i]), float(dots[i]))
-        p, dp, _ = _curve_scalar(s, self.a, self.b, self._rot)
+        p, dp, _ = _curve_scalar(s, self.a, self.b, self.rotation)
         e_t = dp / math.sqrt(dp @ dp)
         left = _cross3(p, e_t)
         cr = _cross3(R, p)
@@ -469,8 +469,8 @@ class Lemniscate:
 
     def _refine(self, R: np.ndarray, s0: float, f0: float) -> float:
         """Maximise ``R . p(s)`` near the sample ``s0`` by safeguarded Newton on ``g = R . p'(s) = 0``."""
-        a, b, rot = self.a, self.b, self._rot
-        lo, hi = s0 - self._ds, s0 + self._ds
+        a, b, rot = self.a, self.b, self.rotation
+        lo, hi = s0 - self.ds, s0 + self.ds
         g_lo = float(_curve_scalar(lo, a, b, rot)[1] @ R)
         g_hi = float(_curve_scalar(hi, a, b, rot)[1] @ R)
         if not (g_lo >= 0.0 >= g_hi):  # not bracketed (far from the path): keep the sample

@@ -222,10 +222,11 @@ class WindField:
         self.turbulent = bool(self.sigma > 0.0)
         self.k1 = k1  # (3, m) [rad/m], kept for inspection
         self.amplitude = amp  # (3, m) [m/s]
-        self._wavevec_t = np.ascontiguousarray(wavevec.reshape(3 * m, 3).T)  # (3, 3m) [rad/m]
-        self._omega = wavevec[..., 0].reshape(3 * m) * self._u_adv  # angular frequency at a fixed point [rad/s]
-        self._phase0 = theta.reshape(3 * m)  # [rad]
-        self._amp = amp.reshape(3 * m)
+        # the 3m Fourier modes flattened (read by the fast fidelity, which sums them for all its kites in one kernel)
+        self.wavevec_t = np.ascontiguousarray(wavevec.reshape(3 * m, 3).T)  # (3, 3m) [rad/m]
+        self.omega = wavevec[..., 0].reshape(3 * m) * self._u_adv  # angular frequency at a fixed point [rad/s]
+        self.phase0 = theta.reshape(3 * m)  # [rad]
+        self.amp = amp.reshape(3 * m)
 
     # ------------------------------------------------------------------ public API
     def mean_speed(self, z: np.ndarray | float) -> np.ndarray:
@@ -280,17 +281,17 @@ class WindField:
             if t_arr.shape[0] not in (1, n):
                 raise ValueError(f"t must be a float or have one entry per position, got shape {np.shape(t)}")
             out = np.empty((n, 3))
-            return _turbulence_kernel(t_arr, np.ascontiguousarray(pos), self._wavevec_t, self._phase0,
-                                      self._omega, self._amp, self.cfg.turbulence_modes, out)
+            return _turbulence_kernel(t_arr, np.ascontiguousarray(pos), self.wavevec_t, self.phase0,
+                                      self.omega, self.amp, self.cfg.turbulence_modes, out)
         if np.ndim(t) == 0:
-            phase_t = np.remainder(self._phase0 - self._omega * float(t), _TWO_PI)  # (3m,)
+            phase_t = np.remainder(self.phase0 - self.omega * float(t), _TWO_PI)  # (3m,)
         else:  # one time per position
             t = np.asarray(t, dtype=float).reshape(-1, 1)
-            phase_t = np.remainder(self._phase0[None, :] - t * self._omega[None, :], _TWO_PI)
-        phase = pos @ self._wavevec_t  # (n, 3m)
+            phase_t = np.remainder(self.phase0[None, :] - t * self.omega[None, :], _TWO_PI)
+        phase = pos @ self.wavevec_t  # (n, 3m)
         phase += phase_t
         np.cos(phase, out=phase)
-        phase *= self._amp
+        phase *= self.amp
         return phase.reshape(n, 3, -1).sum(axis=2)
 
     def velocity(self, t: np.ndarray | float, r: np.ndarray) -> np.ndarray:

@@ -726,10 +726,10 @@ class SurrogateKites:
         self.wind_f[k] = (c.speed_mps, c.ref_height_m, c.roughness_m, math.log(c.ref_height_m / c.roughness_m),
                           c.shear_exponent, c.gust_speed_mps, c.gust_start_s, c.gust_duration_s, 0.0)
         self.wind_i[k] = (_PROFILES[c.profile], 1 if wind.turbulent else 0)
-        self.wavevec_t[k] = wind._wavevec_t
-        self.phase0[k] = wind._phase0
-        self.omega_m[k] = wind._omega
-        self.amp[k] = wind._amp
+        self.wavevec_t[k] = wind.wavevec_t
+        self.phase0[k] = wind.phase0
+        self.omega_m[k] = wind.omega
+        self.amp[k] = wind.amp
 
     def set_kite(self, k: int, r: np.ndarray, v: np.ndarray, t: float, pair_stiffness, L_B: float, L_D: float):
         """Place kite ``k`` at positions/velocities ``r``, ``v`` (5, 3), time ``t``, with the tip-pair stiffness

@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from kite_env.compiled import JIT, njit
-from kite_env.trajectory import _HINT_WINDOW, Lemniscate
+from kite_env.trajectory import HINT_WINDOW, Lemniscate
 
 #: observation terms in canonical order with their sizes (the env's ``_TERM_SPECS`` order)
 TERMS = (("position", 3), ("heading", 2), ("line_forces", 5), ("path", 5), ("rates", 4), ("actuator", 3))
@@ -313,9 +313,9 @@ class Observer:
         self.index = term_indices(list(layout))
         self.samples = np.ascontiguousarray(path.samples, dtype=float)
         self.s_samples = np.ascontiguousarray(path.s_samples, dtype=float)
-        self.window = int(_HINT_WINDOW / path._ds)
-        self._consts = (self.samples, self.s_samples, self.window, float(path._ds), float(path.a), float(path.b),
-                        np.ascontiguousarray(path._rot, dtype=float),
+        self.window = int(HINT_WINDOW / path.ds)
+        self._consts = (self.samples, self.s_samples, self.window, float(path.ds), float(path.a), float(path.b),
+                        np.ascontiguousarray(path.rotation, dtype=float),
                         float(cfg.env.force_scale_N), float(cfg.control.delta_l_max_m),
                         math.radians(cfg.env.tracking_scale_deg))
 

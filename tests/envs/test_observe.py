@@ -114,7 +114,7 @@ def test_nearest_point_matches_lemniscate_at_the_crossing():
     c = path.point(0.0) + 1e-4 * np.array([0.0, 0.0, 1.0])
     m, w = np.empty((3, 3)), np.empty((3, 3))
     for hint in (2 * math.pi - 0.05, math.pi - 0.05, float("nan")):
-        got = nearest_point(*c, hint, o.samples, o.s_samples, o.window, path._ds, path.a, path.b, path._rot, m, w)
+        got = nearest_point(*c, hint, o.samples, o.s_samples, o.window, path.ds, path.a, path.b, path.rotation, m, w)
         ref = path.nearest(c, None if math.isnan(hint) else hint)
         assert got[0] == pytest.approx(ref.s, abs=1e-12) and got[1] == pytest.approx(ref.distance_rad, abs=1e-14)
         np.testing.assert_allclose(got[2:5], ref.point, atol=1e-14)
