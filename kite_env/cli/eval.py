@@ -359,15 +359,20 @@ def _traction_by_seed(metrics: dict) -> dict:
 
 def pool_runs(folders: list[Path]) -> dict:
     """The ``metrics.json`` of the ``kite-eval`` run folders ``folders`` (one policy flown in parts) as one run: the
-    first folder's metrics with the episode rows of all. Raises ValueError unless every part flew the same policy in
-    the same configuration but for ``wind.seed`` and no turbulence seed repeats."""
+    first folder's metrics with the episode rows of all. Raises ValueError (ConfigError for a configuration that no
+    longer loads) unless every part flew the same policy in the same configuration but for ``wind.seed`` (each read
+    as today's: retired keys at their one value dropped, new keys at their defaults) and no turbulence seed
+    repeats."""
     import yaml
+
+    from kite_env.config import config_from_dict, without_retired
 
     def read(folder: Path) -> tuple[dict, dict]:
         for name in ("metrics.json", "config.yaml"):
             if not (folder / name).is_file():
                 raise ValueError(f"--compare: folder {str(folder)!r} has no {name} (not a kite-eval run)")
-        cfg = yaml.safe_load((folder / "config.yaml").read_text())
+        # read as today's configuration: a run recorded before keys were retired or added compares by value
+        cfg = config_from_dict(without_retired(yaml.safe_load((folder / "config.yaml").read_text()))).to_dict()
         cfg.get("wind", {}).pop("seed", None)
         return json.loads((folder / "metrics.json").read_text()), cfg
 
