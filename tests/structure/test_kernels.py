@@ -68,7 +68,7 @@ def _assert_beams_agree(conn, X0, up, stiff, x, Rn):
     n = bn.n_elem
     U = np.empty(n)
     beam_kernels.beam_internal(xe, Re, bn.R0, bn.L0, bn.EA, bn._k11, bn._k12, bn._kmat, np.empty((n, 12)),
-                          np.empty((n, 12, 12)), U)
+                               np.empty((n, 12, 12)), U, True)  # every argument given, as BeamSet.internal does
     _assert_energy_agree(U, bp.energy(xe, Re), K2, xe)
     return bp.local_deformation(xe, Re)
 
@@ -84,12 +84,14 @@ def _assert_shells_agree(s_args, x, R, **kw):
     assert K3 is None and np.array_equal(f3, f1)
     n = sn.n_elem
     U = np.empty(n)
+    # every argument given, as ShellSet.internal gives them: an omitted default is another signature that numba
+    # compiles anew (about 35 s per cold cache)
     shell_kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
-                           sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U)
+                                 sn.bending, np.empty((n, 18)), np.empty((n, 18, 18)), U, True, sn.von_karman)
     _assert_energy_agree(U, sp.energy(x, R), K2, x)
     U3 = np.empty(n)
     shell_kernels.shell_internal(x, R, sn.R0, sn.G, sn.A0h, sn.E, sn.nu, sn.C, sn.K_l, sn.eps_slack, sn.membrane_law,
-                           sn.bending, np.empty((n, 18)), np.empty((1, 18, 18)), U3, False)
+                                 sn.bending, np.empty((n, 18)), np.empty((1, 18, 18)), U3, False, sn.von_karman)
     assert np.array_equal(U3, U)
     return sp
 
