@@ -6,6 +6,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/_venv.sh
+# one BLAS thread per process: the two workers fill the two cores, and OpenBLAS's own threads would spin against the
+# other worker (a cold wing solve with dense factorisations took minutes instead of 10 s)
+export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}" OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" \
+  MKL_NUM_THREADS="${MKL_NUM_THREADS:-1}"
 echo "[lint] ruff check ." >&2
 .venv/bin/python -m ruff check .
 # numba's cache built once per run: one short flight per fidelity compiles the kernels while mypy runs, so that the
