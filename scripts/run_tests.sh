@@ -14,15 +14,16 @@ echo "[lint] ruff check ." >&2
 .venv/bin/python -m ruff check .
 # numba's cache built once per run: one short flight per fidelity compiles the kernels while mypy runs, so that the
 # workers load them instead of each compiling them (about 60 s per cold process)
-warm_log=$(mktemp)
-.venv/bin/kite-bench warm --fidelity fe >"$warm_log.fe" 2>&1 & warm_fe=$!
-.venv/bin/kite-bench warm --fidelity surrogate --fidelity batched >"$warm_log.fast" 2>&1 & warm_fast=$!
-trap 'kill $warm_fe $warm_fast 2>/dev/null || true; rm -f "$warm_log" "$warm_log.fe" "$warm_log.fast"' EXIT
+warm_logs=$(mktemp -d)
+.venv/bin/kite-bench warm --fidelity fe >"$warm_logs/fe" 2>&1 & warm_fe=$!
+.venv/bin/kite-bench warm --fidelity surrogate --fidelity batched >"$warm_logs/fast" 2>&1 & warm_fast=$!
+trap 'kill $warm_fe $warm_fast 2>/dev/null || true; rm -rf "$warm_logs"' EXIT
 echo "[types] mypy" >&2
 .venv/bin/python -m mypy
 for job in fe:$warm_fe fast:$warm_fast; do
-  if wait "${job#*:}"; then grep "^kite-bench warm" "$warm_log.${job%%:*}" >&2 || true
-  else echo "[warm] the ${job%%:*} warm-up failed (the tests below will say why):" >&2; tail -5 "$warm_log.${job%%:*}" >&2; fi
+  log="$warm_logs/${job%%:*}"
+  if wait "${job#*:}"; then grep "^kite-bench warm" "$log" >&2 || true
+  else echo "[warm] the ${job%%:*} warm-up failed (the tests below will say why):" >&2; tail -5 "$log" >&2; fi
 done
 # two workers (pytest-xdist), each test file on one worker so that its module fixtures are built once;
 # KITE_TEST_WORKERS=0 runs the suite in this process
