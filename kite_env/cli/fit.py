@@ -85,6 +85,8 @@ def _fit(args) -> int:
         raise ValueError("kite-fit fits the reduced-order wing of the wing with inertia (structure.dynamic: true)")
     if args.out.suffix != ".npz":
         raise ValueError(f"--out must be a .npz file, got '{args.out}'")
+    if args.replay_s <= 0 or args.replay_every_s <= 0:
+        raise ValueError(f"--replay-s and --replay-every-s must be > 0, got {args.replay_s} and {args.replay_every_s}")
     wing = nominal_wing(cfg.kite.name, cfg)
     data = build_dataset(args.tapes, cfg, wing, log=lambda m: print(m, flush=True))
     K_b = reference_stiffness(cfg)
@@ -110,12 +112,18 @@ def _fit(args) -> int:
         if rnd == args.rounds:
             break
         n_new = 0
+        dt = cfg.dynamics.dt_s  # the tapes' step
+        horizon = max(1, round(args.replay_s / dt))
         for path in sorted(Path(args.tapes).glob("ep_*.npz")):
             arrays, tmeta = load_tape(path)
             index = tmeta["plan"]["index"]
             if index % args.holdout == args.holdout - 1:
                 continue  # held-out flights stay unseen
-            Xc, Yc = corrective_samples(arrays, tmeta, sw, cfg, q0, tips)
+            every_s = args.replay_every_s
+            if tmeta["plan"]["wind_mps"] < args.dense_below_mps:
+                every_s /= 2.0  # low wind: the fast kite's drift grows slowest there and costs it most pull
+            Xc, Yc = corrective_samples(arrays, tmeta, sw, cfg, q0, tips, every=max(1, round(every_s / dt)),
+                                        horizon=horizon)
             extra_X.append(Xc)
             extra_Y.append(Yc)
             extra_g.append(np.full(len(Xc), index))
@@ -184,6 +192,11 @@ def main(argv=None) -> int:
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--rounds", type=int, default=2, help="rounds of corrective samples at the fitted wing's own "
                    "states (data as demonstrator; 0: none)")
+    f.add_argument("--replay-s", type=float, default=0.3, help="length of each replay of the corrective samples [s]")
+    f.add_argument("--replay-every-s", type=float, default=0.5, help="a replay starts every this many seconds of "
+                   "a training flight [s]")
+    f.add_argument("--dense-below-mps", type=float, default=0.0, help="flights in wind below this [m/s] get replays "
+                   "twice as often (0: none)")
     f.add_argument("--config", default=None)
     f.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     t = sub.add_parser("start-table", help="tabulate the full model's start for the fast fidelity's reset")
