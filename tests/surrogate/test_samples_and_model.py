@@ -399,3 +399,19 @@ def test_the_agent_plan_flies_a_trained_agent_alone_and_with_held_offsets():
     runs = np.diff(np.flatnonzero(np.diff(offsets) != 0))  # steps an offset is held (between its changes)
     assert runs.min() >= round(0.2 / env.control_dt) - 1 and runs.max() <= round(1.5 / env.control_dt) + 1
     env.close()
+
+
+@pytest.mark.parametrize("bad", [["--replay-s", "0"], ["--replay-every-s", "-1"], ["--out", "wing.txt"]])
+def test_kite_fit_refuses_bad_fit_options_before_reading_anything(tmp_path, capsys, bad):
+    """``kite-fit fit`` with a replay of no length, a negative spacing or an output that is not .npz: exit 2 with one
+    line naming the option, before a tape is read or a file written."""
+    from kite_env.cli.fit import main
+
+    args = ["fit", "--tapes", str(tmp_path / "no_tapes"), "--out", str(tmp_path / "w.npz"), *bad]
+    if bad[0] == "--out":
+        args[4] = str(tmp_path / bad[1])
+        args = args[:5]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and ("--replay" in err[0] or ".npz" in err[0])
+    assert list(tmp_path.iterdir()) == []
