@@ -30,11 +30,11 @@ from pathlib import Path
 
 
 def _sample_worker(args):
-    out, n, seed, overrides, start, step, starts, agent = args
+    out, n, seed, overrides, start, step, starts, agent, depower = args
     from kite_env.fitting.trajectories import sample_flights
 
     sample_flights(out, n, seed, overrides, start=start, step=step, log=lambda s: print(s, flush=True),
-                   starts=starts, agent=agent)
+                   starts=starts, agent=agent, depower=depower)
     return 0
 
 
@@ -179,6 +179,9 @@ def main(argv=None) -> int:
     s.add_argument("--agent", default=None, metavar="POLICY", help="flights of a trained agent (a shipped name or a "
                    "model.zip), alone and with held offsets (kite_env.fitting.trajectories.agent_plan), instead of "
                    "the flights of the sampling plan")
+    s.add_argument("--depower", action="store_true", help="flights of the controller with held random offsets on the "
+                   "force loop's common line length (kite_env.fitting.trajectories.depower_plan), instead of the "
+                   "flights of the sampling plan")
     s.add_argument("--config", default=None, help="physics config (YAML); default: the flying model")
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     f = sub.add_parser("fit", help="fit the reduced-order wing to the tapes")
@@ -233,10 +236,10 @@ def main(argv=None) -> int:
     if args.episodes < 1 or args.jobs < 1:
         print("kite-fit: error: --episodes and --jobs must be at least 1", file=sys.stderr)
         return 2
+    if args.starts + (args.agent is not None) + args.depower > 1:
+        print("kite-fit: error: --starts, --agent and --depower are three plans; give one", file=sys.stderr)
+        return 2
     if args.agent is not None:
-        if args.starts:
-            print("kite-fit: error: --starts and --agent are two plans; give one", file=sys.stderr)
-            return 2
         from kite_env.envs.figure_eight import KiteFigureEightEnv
         from kite_env.policies import PolicyError, make_agent
 
@@ -250,11 +253,11 @@ def main(argv=None) -> int:
             env.close()
     try:
         if args.jobs == 1:
-            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1, args.starts, args.agent))
+            _sample_worker((args.out, args.episodes, args.seed, over, 0, 1, args.starts, args.agent, args.depower))
         else:
             with mp.get_context("spawn").Pool(args.jobs) as pool:
                 pool.map(_sample_worker, [(args.out, args.episodes, args.seed, over, j, args.jobs, args.starts,
-                                           args.agent) for j in range(args.jobs)])
+                                           args.agent, args.depower) for j in range(args.jobs)])
     except KeyboardInterrupt:
         print("kite-fit: interrupted; run the same command again to go on", file=sys.stderr)
         return 130

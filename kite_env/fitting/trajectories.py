@@ -137,12 +137,42 @@ class HeldNoise:
         return np.array([min(1.0, max(-1.0, a + self._offset))], dtype=np.float32), None
 
 
+class HeldDepower:
+    """Held random offsets on the force loop's common increment L3 (Eq. 16-17; ``kite_env.control``): uniform in
+    ``[-amp, amp]`` [m], each held ``hold_s`` (uniform in the given range) [s], added to what the loop asks.
+
+    Why: in a flight of the paper's controller the force loop sets the common length of the steering lines from the
+    force ratio mu, so recorded flights tie the wing's depower shape to the load that moved it, and a wing fitted to
+    them cannot tell cause from effect; it answers depower several times too strongly (docs/fast_fidelity.md, "Why
+    the fast kite leaves its envelope at low wind"). An excitation the loop does not make, added to the controller's
+    output, makes the closed loop's data informative (Ljung, System Identification: Theory for the User, 2nd ed.,
+    1999, Ch. 13). ``attach(actuator)`` after each reset (the env builds a new actuator)."""
+
+    def __init__(self, amp: float, hold_s: tuple[float, float], control_dt: float, rng: np.random.Generator):
+        self.amp, self.hold, self.dt, self.rng = float(amp), hold_s, float(control_dt), rng
+        self._left, self.offset = 0.0, 0.0
+
+    def attach(self, actuator) -> None:
+        loop = actuator.force_increment
+
+        def force_increment(line_tension):  # one call per controller period
+            if self._left <= 0.0:
+                self.offset = float(self.rng.uniform(-self.amp, self.amp))
+                self._left = float(self.rng.uniform(*self.hold))
+            self._left -= self.dt
+            L3, mu = loop(line_tension)
+            return L3 + self.offset, mu
+
+        self._left = 0.0
+        actuator.force_increment = force_increment
+
+
 @dataclass
 class EpisodePlan:
     """One sampled flight: the policy, its conditions and its seed."""
 
     index: int
-    policy: str  # baseline | random | constant:<a> | held:<amp> | <policy>+held:<amp> | an agent
+    policy: str  # baseline | random | constant:<a> | held:<amp> | <policy>+held:<amp> | an agent; +depower:<m>
     wind_mps: float
     turbulence_max: float
     gust_mps: float
@@ -205,6 +235,26 @@ def start_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
     return plan
 
 
+#: index of the first flight of :func:`depower_plan`: apart from those of the other plans
+DEPOWER_INDEX = 30_000
+
+
+def depower_plan(n: int, seed: int, winds=(4.0, 10.0)) -> list[EpisodePlan]:
+    """``n`` flights of 40 s with held random offsets of up to 0.05-0.2 m on the force loop's common increment
+    (:class:`HeldDepower`), indexed from :data:`DEPOWER_INDEX`: the paper's controller, and the controller with held
+    steering offsets of up to 0.1-0.5, in turn, in the conditions of :func:`sampling_plan` (the common length of the
+    sampled flights moves by 0.1-0.17 m RMS under the loop alone)."""
+    rng = np.random.default_rng(seed)
+    plan = []
+    for i in range(n):
+        dep = f"+depower:{rng.uniform(0.05, 0.2):.3f}"
+        pol = "baseline" + dep if i % 2 == 0 else f"baseline+held:{rng.uniform(0.1, 0.5):.3f}" + dep
+        gust = float(rng.uniform(2.0, 6.0)) if rng.uniform() < 0.25 else 0.0
+        plan.append(EpisodePlan(DEPOWER_INDEX + i, pol, round(float(rng.uniform(*winds)), 3), 0.1, round(gust, 3),
+                                round(float(rng.uniform(3.0, 24.0)), 2), 40.0, int(rng.integers(2**31 - 1))))
+    return plan
+
+
 #: index of the first flight of a trained agent (:func:`agent_plan`): apart from those of the other plans
 AGENT_INDEX = 20_000
 
@@ -252,11 +302,17 @@ def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = Non
     env = KiteFigureEightEnv(overrides=[*base_overrides, *plan.overrides()])
     tape = tape or FlightTape()
     env.recorder = tape
-    agent = make_sampling_policy(plan.policy, env, plan.seed)
+    policy, depower = plan.policy, None
+    if "+depower:" in policy:
+        policy, amp = policy.rsplit("+depower:", 1)
+        depower = HeldDepower(float(amp), (0.2, 1.5), env.control_dt, np.random.default_rng([plan.seed, 1]))
+    agent = make_sampling_policy(policy, env, plan.seed)
     if hasattr(agent, "seed_episode"):
         agent.seed_episode(plan.seed)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=plan.seed)
+    if depower is not None:
+        depower.attach(env.actuator)
     start, done, reason, info = True, False, None, dict(info)
     while not done:
         act, _ = agent.predict(obs, episode_start=np.array([start]), deterministic=True)
@@ -277,16 +333,19 @@ def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = Non
 
 
 def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), start: int = 0, step: int = 1,
-                   log=print, starts: bool = False, agent: str | None = None) -> list[Path]:
+                   log=print, starts: bool = False, agent: str | None = None,
+                   depower: bool = False) -> list[Path]:
     """Fly the episodes ``start, start + step, ...`` of ``sampling_plan(n, seed)`` (``starts``: of
-    :func:`start_plan`; ``agent``: of :func:`agent_plan`) into ``out_dir/ep_XXXX.npz``, skipping those already there
-    (an interrupted run goes on where it stopped; several processes share a plan with distinct ``start`` and the same
-    ``step``)."""
+    :func:`start_plan`; ``agent``: of :func:`agent_plan`; ``depower``: of :func:`depower_plan`) into
+    ``out_dir/ep_XXXX.npz``, skipping those already there (an interrupted run goes on where it stopped; several
+    processes share a plan with distinct ``start`` and the same ``step``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     if agent is not None:
         plans = agent_plan(n, seed, agent)
+    elif depower:
+        plans = depower_plan(n, seed)
     else:
         plans = (start_plan if starts else sampling_plan)(n, seed)
     for plan in plans[start::step]:
@@ -302,5 +361,6 @@ def sample_flights(out_dir: str | Path, n: int, seed: int, base_overrides=(), st
     return paths
 
 
-__all__ = ["AGENT_INDEX", "COLUMNS", "START_INDEX", "EpisodePlan", "FlightTape", "HeldNoise", "agent_plan", "fly_plan",
-           "load_tape", "make_sampling_policy", "sample_flights", "sampling_plan", "save_tape", "start_plan"]
+__all__ = ["AGENT_INDEX", "COLUMNS", "DEPOWER_INDEX", "START_INDEX", "EpisodePlan", "FlightTape", "HeldDepower",
+           "HeldNoise", "agent_plan", "depower_plan", "fly_plan", "load_tape", "make_sampling_policy", "sample_flights",
+           "sampling_plan", "save_tape", "start_plan"]

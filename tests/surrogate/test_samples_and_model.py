@@ -415,3 +415,60 @@ def test_kite_fit_refuses_bad_fit_options_before_reading_anything(tmp_path, caps
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and ("--replay" in err[0] or ".npz" in err[0])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_depower_plan_excites_the_force_loop_with_held_offsets():
+    """depower_plan: indexed apart from the other plans, 40 s flights of the controller (alone and with held steering
+    offsets) with held depower offsets of 0.05-0.2 m, the same plan for the same seed; HeldDepower adds to the force
+    loop's common increment L3 an offset within its amplitude, held 0.2-1.5 s, on top of what the loop asks (the loop
+    itself runs on: its integral is the same as without the offset)."""
+    import copy
+
+    import gymnasium as gym
+
+    from kite_env.fitting.trajectories import (
+        AGENT_INDEX,
+        DEPOWER_INDEX,
+        HeldDepower,
+        agent_plan,
+        depower_plan,
+        sampling_plan,
+        start_plan,
+    )
+
+    plan = depower_plan(8, 3)
+    assert plan == depower_plan(8, 3) and plan != depower_plan(8, 4)
+    assert [p.index for p in plan] == list(range(DEPOWER_INDEX, DEPOWER_INDEX + 8))
+    others = sampling_plan(200, 3) + start_plan(200, 3) + agent_plan(200, 3, "ppo")
+    assert not {p.index for p in plan} & {p.index for p in others} and AGENT_INDEX < DEPOWER_INDEX
+    for k, p in enumerate(plan):
+        base, amp = p.policy.rsplit("+depower:", 1)
+        assert 0.05 <= float(amp) <= 0.2 and p.duration_s == 40.0 and 4.0 <= p.wind_mps <= 10.0
+        assert base == "baseline" if k % 2 == 0 else (base.startswith("baseline+held:")
+                                                       and 0.1 <= float(base.split(":")[1]) <= 0.5)
+
+    env = gym.make("KiteFigureEightFast-v1").unwrapped
+    env.reset(seed=0)
+    plain = copy.deepcopy(env.actuator)
+    HeldDepower(0.1, (0.2, 1.5), env.control_dt, np.random.default_rng(7)).attach(env.actuator)
+    rng = np.random.default_rng(1)
+    offsets = []
+    for _ in range(300):
+        tension = rng.uniform(200.0, 3000.0, 4)
+        (L3, mu), (L3_0, mu_0) = env.actuator.force_increment(tension), plain.force_increment(tension)
+        assert mu == mu_0 and env.actuator.integral == plain.integral
+        offsets.append(L3 - L3_0)
+    offsets = np.round(offsets, 9)
+    assert np.abs(offsets).max() <= 0.1 and len(set(offsets)) > 3
+    runs = np.diff(np.flatnonzero(np.diff(offsets) != 0))
+    assert runs.min() >= round(0.2 / env.control_dt) - 1 and runs.max() <= round(1.5 / env.control_dt) + 1
+
+
+@pytest.mark.parametrize("plans", [["--starts", "--depower"], ["--agent", "ppo", "--depower"]])
+def test_kite_fit_sample_takes_one_plan(tmp_path, capsys, plans):
+    """``kite-fit sample`` with two plans: exit 2 with one line, nothing flown or written."""
+    from kite_env.cli.fit import main
+
+    assert main(["sample", "--out", str(tmp_path / "tapes"), *plans]) == 2
+    assert "three plans; give one" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
