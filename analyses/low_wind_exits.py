@@ -11,7 +11,7 @@ script accepts that one mismatch on purpose and says so in its output (docs/fast
 short").
 
     .venv/bin/python analyses/low_wind_exits.py [--winds 4.5,5.5] [--episodes 20] [--seed 50000]
-        [--duration 120] [--force-loop on|off]
+        [--duration 120] [--force-loop on|off] [--set SECTION.KEY=VALUE ...]
 
 Prints one line per wind: flights that left the envelope (and their seeds), mean traction +- standard error,
 RMS tracking error.
@@ -25,14 +25,14 @@ import math
 import numpy as np
 
 
-def fly(wind_mps: float, seed: int, duration_s: float, force_loop: bool) -> dict:
+def fly(wind_mps: float, seed: int, duration_s: float, force_loop: bool, overrides=()) -> dict:
     """One flight of the controller in the fast fidelity (wind ``wind_mps``, turbulence 0.1, realisation and reset
     ``seed``): its end, mean traction [N] and RMS distance to the figure [deg]."""
     from kite_env.envs.figure_eight import KiteFigureEightEnv
     from kite_env.policies.baseline import BaselineAgent
 
     over = [f"wind.speed_mps={wind_mps}", "wind.turbulence_intensity=0.1", f"wind.seed={seed}",
-            f"env.max_episode_s={duration_s}"]
+            f"env.max_episode_s={duration_s}", *overrides]
     if not force_loop:
         over += ["control.k3_m=0", "control.k3i_per_s=0"]
     env = KiteFigureEightEnv(overrides=over, fidelity="surrogate")
@@ -59,6 +59,8 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=50000, help="first seed (the held-out seeds of docs/agents.md)")
     p.add_argument("--duration", type=float, default=120.0)
     p.add_argument("--force-loop", choices=("on", "off"), default="on")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="config override, e.g. sim.surrogate_path=runs/fast/rhino16.npz (another reduced-order wing)")
     args = p.parse_args()
     loop = args.force_loop == "on"
     if not loop:
@@ -76,7 +78,7 @@ def main() -> None:
         print("force loop off (control.k3_m = control.k3i_per_s = 0): the shipped wing's model record differs in "
               "these two keys only, accepted for this diagnosis")
     for w in (float(x) for x in args.winds.split(",")):
-        rows = [fly(w, s, args.duration, loop) for s in range(args.seed, args.seed + args.episodes)]
+        rows = [fly(w, s, args.duration, loop, args.set) for s in range(args.seed, args.seed + args.episodes)]
         left = [(args.seed + i, round(r["t"], 1)) for i, r in enumerate(rows) if r["end"] != "time limit"]
         F = np.array([r["traction_N"] for r in rows])
         print(f"{w:g} m/s, force loop {args.force_loop}: {len(left)} of {len(rows)} flights left the envelope "

@@ -8,7 +8,7 @@ the reduced-order wing answers there otherwise than the wing with inertia, what 
 fidelity does not carry over (docs/fast_fidelity.md, "Where it falls short").
 
     .venv/bin/python analyses/steering_response.py [--freqs 0.5,1,2,3,5] [--amplitude 0.05] [--wind 6.3]
-        [--periods-s 16] [--fidelity fe --fidelity surrogate]
+        [--periods-s 16] [--fidelity fe --fidelity surrogate] [--set SECTION.KEY=VALUE ...]
 
 ``--input depower`` adds the sinusoid (``--amplitude`` in metres) to the force loop's common increment of both
 steering lines instead (Eq. 16-17's L3, the depower actuation) and gives the force ratio's response
@@ -37,7 +37,7 @@ def lock_in(t: np.ndarray, y: np.ndarray, f_hz: float) -> complex:
 
 
 def response(fidelity: str, f_hz: float, amplitude: float, wind_mps: float, record_s: float,
-             settle_s: float = 4.0, depower: bool = False) -> dict:
+             settle_s: float = 4.0, depower: bool = False, overrides=()) -> dict:
     """Fly the controller plus ``amplitude * sin(2 pi f t)`` (normalised action) and return the gains of yaw rate
     [rad/s per m] and tether force [N per m] on the applied steering difference at ``f_hz``, with phases [deg].
     With ``depower`` the sinusoid [m] goes into the force loop's common increment L3 instead, and the gains are on
@@ -48,7 +48,7 @@ def response(fidelity: str, f_hz: float, amplitude: float, wind_mps: float, reco
     n_periods = max(1, round(record_s * f_hz))
     duration = settle_s + n_periods / f_hz
     env = KiteFigureEightEnv(overrides=[f"wind.speed_mps={wind_mps}", "wind.turbulence_intensity=0.0",
-                                        f"env.max_episode_s={duration + 1.0}"], fidelity=fidelity)
+                                        f"env.max_episode_s={duration + 1.0}", *overrides], fidelity=fidelity)
     agent = BaselineAgent(env.cfg)
     obs, _ = env.reset(seed=0)
     if depower:
@@ -94,6 +94,8 @@ def main() -> None:
     p.add_argument("--wind", type=float, default=6.3, help="steady wind speed [m/s]")
     p.add_argument("--periods-s", type=float, default=16.0, help="recorded time per frequency [s] (whole periods)")
     p.add_argument("--fidelity", action="append", choices=("fe", "surrogate"), default=None)
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="config override, e.g. sim.surrogate_path=runs/fast/rhino16.npz (another reduced-order wing)")
     args = p.parse_args()
     depower = args.input == "depower"
     amplitude = args.amplitude if args.amplitude is not None else (0.01 if depower else 0.05)
@@ -108,7 +110,7 @@ def main() -> None:
               f"{'force gain [kN/m]':>18} {'phase [deg]':>11}")
     for f in (float(x) for x in args.freqs.split(",")):
         for fid in args.fidelity or ["fe", "surrogate"]:
-            r = response(fid, f, amplitude, args.wind, args.periods_s, depower=depower)
+            r = response(fid, f, amplitude, args.wind, args.periods_s, depower=depower, overrides=args.set)
             if r["ended"]:
                 print(f"{fid:<10} {f:>6g}  ended early: {r['ended']}")
                 continue
