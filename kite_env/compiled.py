@@ -43,14 +43,37 @@ import os
 
 try:  # numba is a declared dependency; the fallback keeps the package importable without it
     from numba import njit
+    from numba.core import types as _types
+    from numba.extending import intrinsic
 
     NUMBA_AVAILABLE = True
+
+    @intrinsic
+    def fma(typingctx, a, b, c):
+        """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``: the FMA instruction where the CPU has one, a correctly
+        rounded library call where not), for kernels that must give what an FMA kernel of OpenBLAS gives; kernels
+        only (``fastmath=False`` contracts nothing by itself)."""
+        sig = _types.float64(_types.float64, _types.float64, _types.float64)
+
+        def codegen(context, builder, signature, args):
+            return builder.fma(*args)
+
+        return sig, codegen
 except ImportError:  # pragma: no cover - exercised only in environments without numba
     NUMBA_AVAILABLE = False
 
     def njit(*_args, **_kwargs):
         """Identity decorator used when numba is missing (kernels run as plain Python)."""
         return lambda fun: fun
+
+    def fma(a, b, c):
+        """``a * b + c`` rounded once (exact rational arithmetic; non-finite operands as the unfused form)."""
+        import math
+        from fractions import Fraction
+
+        if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+            return a * b + c
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
 
 
 BACKENDS = ("auto", "numba", "numpy")

@@ -501,6 +501,21 @@ def _accelerations(rk, vk, wind5, yk, F0, zero_q, zero_K, m, rest, k_c, c_c, rho
 
 
 @njit(**JIT)
+def step_work(n_in, n_out, W0, W1, W2):
+    """The work arrays of :func:`step_kites_with` for ``n_in`` inputs and ``n_out`` outputs of the wing and the
+    layer widths of ``W0``, ``W1``, ``W2`` (each written before it is read in a step: a caller that steps many times
+    allocates them once)."""
+    return (np.empty((6, 3)), np.empty((6, 3)), np.empty(1), np.empty((4, 3)), np.zeros((4, 3)), np.zeros((12, 12)),
+            np.empty((3, 3)), np.empty((5, 3)), np.empty(3), np.empty(_WORK), np.empty(BLOCK, dtype=np.int64),
+            np.empty(BLOCK, dtype=np.bool_),  # per kite of the block: the RK4 sums are finite
+            np.empty((BLOCK, n_in)),  # the stage's inputs (with the latent state's)
+            np.empty((BLOCK, n_out)), np.empty((BLOCK, 5, 3)), np.empty((BLOCK, 5, 3)),
+            np.empty((BLOCK, 4, 5, 3)),  # RK4 stage velocities (k_iv) and accelerations (k_ia)
+            np.empty((BLOCK, 4, 5, 3)), np.empty((BLOCK, W0.shape[1]), dtype=np.float32),
+            np.empty((BLOCK, W1.shape[1]), dtype=np.float32), np.empty((BLOCK, W2.shape[1]), dtype=np.float32))
+
+
+@njit(**JIT)
 def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0, omega_m, amp,
                n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter, tether_diameter,
                tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind, turb, R, tether,
@@ -531,28 +546,20 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
     (the kites are independent; the work arrays shared by the kites are written before they are read), so the
     result is bit for bit that of ``n = 1`` and of the one-kite-at-a-time loop before the blocks.
     """
-    pos = np.empty((6, 3))
-    w6 = np.empty((6, 3))
-    t_buf = np.empty(1)
-    F0 = np.empty((4, 3))
-    zero_q = np.zeros((4, 3))
-    zero_K = np.zeros((12, 12))
-    Rs = np.empty((3, 3))
-    vn = np.empty((5, 3))
-    lam = np.empty(3)
-    work = np.empty(_WORK)
-    # per kite of the block
-    idx = np.empty(BLOCK, dtype=np.int64)
-    ok = np.empty(BLOCK, dtype=np.bool_)  # the RK4 sums are finite
-    xs = np.empty((BLOCK, X.shape[1]))  # the stage's inputs (with the latent state's)
-    ys = np.empty((BLOCK, Y.shape[1]))
-    ws = np.empty((BLOCK, 5, 3))
-    rs = np.empty((BLOCK, 5, 3))
-    kv = np.empty((BLOCK, 4, 5, 3))  # RK4 stage velocities (k_iv) and accelerations (k_ia)
-    ka = np.empty((BLOCK, 4, 5, 3))
-    h0 = np.empty((BLOCK, W0.shape[1]), dtype=np.float32)
-    h1 = np.empty((BLOCK, W1.shape[1]), dtype=np.float32)
-    h2 = np.empty((BLOCK, W2.shape[1]), dtype=np.float32)
+    step_kites_with(step_work(X.shape[1], Y.shape[1], W0, W1, W2), dt, active, t, r, v, rest, pair_damping, q_design,
+                    wind_f, wind_i, wavevec_t, phase0, omega_m, amp, n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho,
+                    line_cd, line_diameter, tether_diameter, tether_length, reel_speed, winch, tip_lengths, gravity,
+                    alpha, lo, hi, X, Y, wind, turb, R, tether, tension, length, status, Z, sel, gain, K_b)
+
+
+@njit(**JIT)
+def step_kites_with(work_arrays, dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i, wavevec_t, phase0,
+                    omega_m, amp, n_modes, W0, b0, W1, b1, W2, b2, m, k_c, c_c, rho, line_cd, line_diameter,
+                    tether_diameter, tether_length, reel_speed, winch, tip_lengths, gravity, alpha, lo, hi, X, Y, wind,
+                    turb, R, tether, tension, length, status, Z, sel, gain, K_b):
+    """:func:`step_kites` with its work arrays ``work_arrays`` (:func:`step_work`)."""
+    (pos, w6, t_buf, F0, zero_q, zero_K, Rs, vn, lam, work, idx, ok, xs, ys, ws, rs, kv, ka, h0, h1,
+     h2) = work_arrays
     half = 0.5 * dt
     k_next = 0
     while True:
@@ -624,6 +631,48 @@ def step_kites(dt, active, t, r, v, rest, pair_damping, q_design, wind_f, wind_i
             add_stiffness(X[k], K_b, Y[k])
             _line_state_one(r[k], v[k], rest[k], k_c, c_c, tension[k], length[k])
             status[k] = _status(ok[b], X[k], Y[k], lo, hi)
+
+
+#: the float64 arrays of :meth:`SurrogateKites.pack` in the order of their offsets in its layout, then its int64 and
+#: its float32 arrays (the layout: the sizes of :data:`PACK_SIZES`, then an offset per array)
+PACK_F64 = ("t", "r", "v", "rest", "pair_damping", "q_design", "wind_f", "wavevec_t", "phase0", "omega_m", "amp", "m",
+            "tether_length", "reel_speed", "_winch", "tip_lengths", "_lo", "_hi", "X", "Y", "wind", "turb", "R",
+            "tether_force", "tension", "length", "Z", "_gain", "_K_b", "_scalars")
+PACK_I64 = ("wind_i", "status", "_sel")
+PACK_F32 = ("W0", "b0", "W1", "b1", "W2", "b2")
+PACK_SIZES = ("n", "n_in", "n_out", "n_mode_cols", "n_tau", "n_sel", "n_modes", "n_h0", "n_h1")
+_P = len(PACK_SIZES)
+_PI64 = _P + len(PACK_F64)
+_PF32 = _PI64 + len(PACK_I64)
+
+
+@njit(**JIT)
+def kite_views(f, i, w, lay):
+    """The arguments of :func:`step_kites` after ``dt`` and ``active`` as views of the buffers of
+    :meth:`SurrogateKites.pack` (``f`` float64, ``i`` int64, ``w`` float32, ``lay`` the layout)."""
+    n, n_in, n_out, m3, n_tau, n_sel, n_modes, n_h0, n_h1 = (lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6],
+                                                             lay[7], lay[8])
+    o = lay[_P:_PI64]
+    oi = lay[_PI64:_PF32]
+    ow = lay[_PF32:]
+    sc = f[o[29]:o[29] + 8]  # k_c, c_c, rho, line_cd, line_diameter, tether_diameter, gravity, alpha
+    return (f[o[0]:o[0] + n], f[o[1]:o[1] + 15 * n].reshape((n, 5, 3)), f[o[2]:o[2] + 15 * n].reshape((n, 5, 3)),
+            f[o[3]:o[3] + 4 * n].reshape((n, 4)), f[o[4]:o[4] + 4 * n].reshape((n, 4)),
+            f[o[5]:o[5] + 12].reshape((4, 3)),
+            f[o[6]:o[6] + 9 * n].reshape((n, 9)), i[oi[0]:oi[0] + 2 * n].reshape((n, 2)),
+            f[o[7]:o[7] + 3 * m3 * n].reshape((n, 3, m3)), f[o[8]:o[8] + m3 * n].reshape((n, m3)),
+            f[o[9]:o[9] + m3 * n].reshape((n, m3)), f[o[10]:o[10] + m3 * n].reshape((n, m3)), n_modes,
+            w[ow[0]:ow[0] + n_in * n_h0].reshape((n_in, n_h0)), w[ow[1]:ow[1] + n_h0],
+            w[ow[2]:ow[2] + n_h0 * n_h1].reshape((n_h0, n_h1)), w[ow[3]:ow[3] + n_h1],
+            w[ow[4]:ow[4] + n_h1 * n_out].reshape((n_h1, n_out)), w[ow[5]:ow[5] + n_out],
+            f[o[11]:o[11] + 5], sc[0], sc[1], sc[2], sc[3], sc[4], sc[5], f[o[12]:o[12] + n], f[o[13]:o[13] + n],
+            f[o[14]:o[14] + 5], f[o[15]:o[15] + 2], sc[6], sc[7], f[o[16]:o[16] + n_in], f[o[17]:o[17] + n_in],
+            f[o[18]:o[18] + n * n_in].reshape((n, n_in)), f[o[19]:o[19] + n * n_out].reshape((n, n_out)),
+            f[o[20]:o[20] + 15 * n].reshape((n, 5, 3)), f[o[21]:o[21] + 18 * n].reshape((n, 6, 3)),
+            f[o[22]:o[22] + 9 * n].reshape((n, 3, 3)), f[o[23]:o[23] + n], f[o[24]:o[24] + 4 * n].reshape((n, 4)),
+            f[o[25]:o[25] + 4 * n].reshape((n, 4)), i[oi[1]:oi[1] + n],
+            f[o[26]:o[26] + n * n_tau * n_sel].reshape((n, n_tau, n_sel)), i[oi[2]:oi[2] + n_sel],
+            f[o[27]:o[27] + n_tau], f[o[28]:o[28] + 144].reshape((12, 12)))
 
 
 # ---------------------------------------------------------------------------------------------------- N kites
@@ -707,8 +756,11 @@ class SurrogateKites:
                                 dyn.winch_speed_max_mps, dyn.winch_time_constant_s])
         self.status = np.zeros(n, dtype=np.int64)
         self._all = np.ones(n, dtype=np.bool_)
+        self._bind_step_args()
+
+    def _bind_step_args(self) -> None:
         # step_kites' arguments after ``dt`` and ``active``, bound once: the arrays are updated in place and never
-        # rebound, and gathering some 50 attributes per call cost a tenth of a single kite's physics step
+        # rebound (but by pack), and gathering some 50 attributes per call cost a tenth of a single kite's physics step
         self._step_args = (self.t, self.r, self.v, self.rest, self.pair_damping, self.q_design, self.wind_f,
                            self.wind_i, self.wavevec_t, self.phase0, self.omega_m, self.amp, self.n_modes,
                            *self._weights, self.m, self.k_c, self.c_c, self.rho, self.line_cd, self.line_d,
@@ -716,6 +768,42 @@ class SurrogateKites:
                            self.baumgarte, self._lo, self._hi, self.X, self.Y, self.wind, self.turb, self.R,
                            self.tether_force, self.tension, self.length, self.status, self.Z, self._sel, self._gain,
                            self._K_b)
+
+    def pack(self):
+        """Move the arrays of :func:`step_kites` into one buffer per dtype (float64 with the scalar parameters,
+        int64, float32): the attributes become views of the buffers, with their values. Returns ``(f64, i64, f32,
+        layout)`` for :func:`kite_views`, so that a compiled caller takes four arrays instead of some 45 arguments
+        (numba unboxes every argument at every call, about 0.1 us an array). Pack again after an attribute was
+        replaced: the views are the attributes only until then (an unpickled copy holds them as separate arrays)."""
+        W, b = self._W, self._b
+        arrays = {name: getattr(self, name) for name in PACK_F64[:-1] + PACK_I64}
+        arrays["_scalars"] = np.array([self.k_c, self.c_c, self.rho, self.line_cd, self.line_d, self.tether_d,
+                                       self.g, self.baumgarte], dtype=float)
+        arrays.update(W0=W[0], b0=b[0], W1=W[1], b1=b[1], W2=W[2], b2=b[2])
+        sizes = (self.n, self.X.shape[1], self.Y.shape[1], self.amp.shape[1], self.Z.shape[1], self.Z.shape[2],
+                 self.n_modes, W[0].shape[1], W[1].shape[1])
+        layout = list(sizes)
+        buffers = []
+        for names, dtype in ((PACK_F64, np.float64), (PACK_I64, np.int64), (PACK_F32, np.float32)):
+            offsets, total = [], 0
+            for name in names:
+                offsets.append(total)
+                total += -(-arrays[name].size // 16) * 16  # each array on a 64-byte (float64) boundary
+            buf = np.zeros(total, dtype=dtype)
+            for name, o in zip(names, offsets):
+                a = arrays[name]
+                view = buf[o:o + a.size].reshape(a.shape)
+                view[...] = a
+                arrays[name] = view
+            layout += offsets
+            buffers.append(buf)
+        for name in PACK_F64[:-1] + PACK_I64:
+            setattr(self, name, arrays[name])
+        self._W = [arrays["W0"], arrays["W1"], arrays["W2"]]
+        self._b = [arrays["b0"], arrays["b1"], arrays["b2"]]
+        self._weights = tuple(a for pair in zip(self._W, self._b) for a in pair)
+        self._bind_step_args()
+        return buffers[0], buffers[1], buffers[2], np.array(layout, dtype=np.int64)
 
     # ------------------------------------------------------------------ set-up of one kite
     def set_wind(self, k: int, wind) -> None:
@@ -869,6 +957,9 @@ class SurrogateFlightSimulator(FlightSimulator):
                  surrogate_path=None):
         if start not in ("table", "fe", "table_only"):
             raise ValueError(f"start must be 'table', 'fe' or 'table_only', got {start!r}")
+        # the kites' arrays hold a state newer than ``state``, ``t`` and the last record (:meth:`advanced`)
+        self._stale = False
+        self._last_rec: _FastRecord | None = None
         self.cfg, self.wind, self.backend = cfg, wind, "numba"
         self.wing = wing if wing is not None else nominal_wing(cfg.kite.name, cfg)
         if surrogate is None:
@@ -912,6 +1003,66 @@ class SurrogateFlightSimulator(FlightSimulator):
         self.fe_starts += 1
         return super().start_wing(X)
 
+    # ``state`` and ``t`` (FlightSimulator's attributes): the last record's, built from the kites' arrays when read
+    # after a compiled control step (:meth:`advanced`), which makes no record
+    @property
+    def state(self):
+        if self._stale:
+            self._settle(self._record())
+        return self._state
+
+    @state.setter
+    def state(self, value):
+        if self._stale:
+            self._settle(self._record())
+        self._state = value
+
+    @property
+    def t(self):
+        if self._stale:
+            self._settle(self._record())
+        return self._t
+
+    @t.setter
+    def t(self, value):
+        if self._stale:
+            self._settle(self._record())
+        self._t = value
+
+    def _settle(self, rec):
+        """``rec`` is the last record: ``state`` and ``t`` are its."""
+        self._stale = False
+        self._last_rec = rec
+        self._state, self._t = rec.state, rec.t
+
+    def advanced(self) -> None:
+        """The kites' arrays were advanced by good physics steps outside :meth:`step` (the env's compiled control
+        step, :mod:`kite_env.envs.fast_step`): the record of their state, ``state`` and ``t`` are built when read
+        (:meth:`last_record`)."""
+        self._stale = True
+
+    def last_record(self):
+        """The record of the last step (or of the reset)."""
+        if self._stale:
+            self._settle(self._record())
+        return self._last_rec
+
+    def settle_snapshot(self, snap):
+        """After a compiled control step whose physics step failed: the record of the last good state, from its
+        snapshot ``snap`` (:func:`kite_env.envs.fast_step.control_step`), is the last record (as :meth:`step`
+        leaves it when it raises); returns it."""
+        from kite_env.envs import fast_step as fs
+
+        n_in = self.kites.X.shape[1]
+        s = snap.tolist()
+        rec = _FastRecord(s[fs.S_T], snap[fs.S_R:fs.S_R + 15].reshape(5, 3).copy(),
+                          snap[fs.S_V:fs.S_V + 15].reshape(5, 3).copy(), snap[fs.S_Y:fs.S_Y + 17].copy(),
+                          snap[fs.S_X:fs.S_X + n_in].copy(), snap[fs.S_RK:fs.S_RK + 9].reshape(3, 3).copy(),
+                          snap[fs.S_TENSION:fs.S_TENSION + 4].copy(), snap[fs.S_LENGTH:fs.S_LENGTH + 4].copy(),
+                          s[fs.S_TETHER], self.wing.mesh.nodes, s[fs.S_TETHER_LENGTH], s[fs.S_REEL])
+        self._settle(rec)
+        return rec
+
     def _record(self):
         ks = self.kites
         return _FastRecord(ks.t.item(0), ks.r[0].copy(), ks.v[0].copy(), ks.Y[0].copy(), ks.X[0].copy(),
@@ -928,7 +1079,8 @@ class SurrogateFlightSimulator(FlightSimulator):
         ks.tether_force[0] = np.nan
         ks.evaluate()
         self._raise_status()
-        return self._record()
+        rec = self._last_rec = self._record()
+        return rec
 
     def _raise_status(self):
         st = int(self.kites.status[0])
@@ -942,9 +1094,11 @@ class SurrogateFlightSimulator(FlightSimulator):
             raise RuntimeError("call reset() before step()")
         if not (L_B > 0 and L_D > 0 and math.isfinite(L_B) and math.isfinite(L_D)):
             raise ValueError(f"steering-line rest lengths must be positive and finite, got {L_B!r}, {L_D!r}")
+        if self._stale:  # the record of the state this step starts from, before the arrays move on
+            self._settle(self._record())
         self.kites.step(L_B, L_D)
         if self.kites.status.item(0) != OK:
             self._raise_status()
         rec = self._record()
-        self.state, self.t = rec.state, rec.t
+        self._settle(rec)
         return rec

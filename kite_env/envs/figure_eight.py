@@ -18,9 +18,11 @@ import numpy as np
 from gymnasium import spaces
 
 from kite_env.config import OBSERVATION_TERMS, Config, ConfigError, config_from_dict, load_config, parse_overrides
-from kite_env.control import LineActuator
+from kite_env.control import POWER_LINES_MIN_N, LineActuator
 from kite_env.dynamics.factory import make_simulator
+from kite_env.dynamics.fast import SurrogateFlightSimulator
 from kite_env.dynamics.simulator import FlightSimulator, NumericalFailure, SimulationError, StepRecord
+from kite_env.envs import fast_step as fs
 from kite_env.envs.observe import FEATURES, N_PARTS, Observer
 from kite_env.trajectory import Lemniscate
 from kite_env.wind import WindField
@@ -228,7 +230,15 @@ class KiteFigureEightEnv(gym.Env):
         self._wing = wing
         #: optional :class:`kite_env.flight.FlightRecorder`: gets every physics step (kite-eval's time series)
         self.recorder = None
-        self.rec: StepRecord | None = None
+        self._rec: StepRecord | None = None
+        self._rec_pending = False  # ``rec`` is the simulator's last record, not yet built (the compiled step)
+        # ``rec`` is the record of the simulator's current state (no physics step failed since): the compiled step
+        # (kite_env.envs.fast_step) starts from the kites' arrays, so it runs only then
+        self._rec_live = False
+        # the compiled step's arguments around the action's (bound at the first step of the fast fidelity)
+        self._fast_sim = False
+        self._fast_head: tuple | None = None
+        self._fast_tail: tuple | None = None
         #: KCU positions [x, y, z] [m] after each step, for the drawing (normalised there)
         self._trail: list[list[float]] = []
         self._fig: Figure | None = None
@@ -240,6 +250,68 @@ class KiteFigureEightEnv(gym.Env):
         self._kcu: list[float] = []  # KCU position [m] of ``rec``
         self._tracking = 0.0
         self._slack_ends = slack_tether_ends(cfg)
+
+    @property
+    def rec(self) -> StepRecord | None:
+        """The record of the last good physics step (or of the reset)."""
+        if self._rec_pending:
+            assert isinstance(self.sim, SurrogateFlightSimulator)
+            self._rec, self._rec_pending = self.sim.last_record(), False
+        return self._rec
+
+    @rec.setter
+    def rec(self, value: StepRecord | None) -> None:
+        self._rec, self._rec_pending = value, False
+
+    def _bind_fast(self, sim: SurrogateFlightSimulator) -> None:
+        """Bind the compiled control step's arguments (:func:`kite_env.envs.fast_step.control_step`): this env's
+        constants, path and outputs in one float64 buffer (``_parts``, ``_feats`` become views of it), ``sim``'s
+        kite in the buffers of :meth:`SurrogateKites.pack`."""
+        cfg, c, e = self.cfg, self.control_cfg, self.cfg.env
+        ctrl = np.zeros(10)
+        ctrl[[fs.C_DL_MAX_ACTION, fs.C_DL_MAX, fs.C_K2, fs.C_K3, fs.C_K3I, fs.C_MU_TARGET, fs.C_INTEGRAL_MAX,
+              fs.C_CONTROL_DT, fs.C_LINE_SPEED_MAX, fs.C_POWER_MIN]] = (
+            cfg.control.delta_l_max_m, c.delta_l_max_m, c.k2, c.k3_m, c.k3i_per_s, c.mu_target,
+            c.force_integral_max_m, c.control_dt_s, c.line_speed_max_mps, POWER_LINES_MIN_N)
+        envp = np.zeros(9)
+        envp[[fs.E_N_PHYSICS, fs.E_SIN_GROUND, fs.E_SLACK_ENDS, fs.E_SLACK_N, fs.E_W_TRACKING, fs.E_W_TRACTION,
+              fs.E_TRACTION_REF, fs.E_W_ACTION, fs.E_CRASH]] = (
+            self.n_physics, _SIN_GROUND, 1.0 if self._slack_ends else 0.0, e.slack_tether_N, e.w_tracking,
+            e.w_traction, e.traction_ref_N, e.w_action_rate, e.crash_penalty)
+        (samples, s_samples, window, ds, path_a, path_b, rot, force_scale, dl_max,
+         tracking_scale) = self.observer._consts
+        ks = sim.kites
+        kf, ki, kw, klay = ks.pack()
+        parts = {"ctrl": ctrl, "envp": envp, "samples": samples, "s_samples": s_samples, "rot": rot,
+                 "scalars": np.array([window, ds, path_a, path_b, force_scale, dl_max, tracking_scale], dtype=float),
+                 "parts": self._parts, "feats": self._feats, "snap": np.zeros(fs.S_X + ks.X.shape[1]),
+                 "out": np.zeros(fs.N_OUT)}
+        offsets, total = [], 0
+        for name in fs.ENV_F64:
+            offsets.append(total)
+            total += -(-parts[name].size // 8) * 8
+        ef = np.zeros(total)
+        for name, o in zip(fs.ENV_F64, offsets):
+            view = ef[o:o + parts[name].size].reshape(parts[name].shape)
+            view[...] = parts[name]
+            parts[name] = view
+        self._parts, self._feats, self._snap, self._out = parts["parts"], parts["feats"], parts["snap"], parts["out"]
+        ei = np.array([len(s_samples), self._snap.size, *offsets, *self.observer.index], dtype=np.int64)
+        ew = np.concatenate([self.observation_space.low, self.observation_space.high]).astype(np.float32)
+        self._fast_head = (ef, ei, ew)
+        self._fast_tail = (ks.dt, ks._all, kf, ki, kw, klay)
+        # numba loads the kernel from its cache (or compiles it) at its first call, some 0.1 s: here, with the reset,
+        # and not in the first step. A dry call: rest lengths of -inf are refused before anything is stepped (it
+        # writes only the scratch ``out``)
+        ninf = -math.inf
+        fs.control_step(0.0, 0.0, 0.0, ninf, ninf, 0.0, ninf, ninf, *self._fast_head,
+                        np.empty(self._n_obs, dtype=np.float32), *self._fast_tail)
+
+    def __getstate__(self):
+        # the compiled step's buffers are views that a pickle would copy apart: bound again at the next step
+        state = self.__dict__.copy()
+        state["_fast_head"] = state["_fast_tail"] = None
+        return state
 
     # ------------------------------------------------------------------ gymnasium API
     def share_wing(self, wing) -> None:
@@ -293,6 +365,10 @@ class KiteFigureEightEnv(gym.Env):
                 failed_starts += 1
         else:
             raise StartError(f"reset failed: the wing did not converge at the start ({last_error})")
+        self._rec_live = True
+        self._fast_sim = isinstance(self.sim, SurrogateFlightSimulator)
+        if self._fast_sim and self._fast_head is None:
+            self._bind_fast(self.sim)  # type: ignore[arg-type]
         assert self.sim is not None and self.sim.L_B0 is not None and self.sim.L_D0 is not None  # set by the reset
         self.actuator = LineActuator(self.control_cfg, self.sim.L_B0, self.sim.L_D0)
         self.L_B, self.L_D = self.sim.L_B0, self.sim.L_D0
@@ -330,7 +406,7 @@ class KiteFigureEightEnv(gym.Env):
                 f"{e['wind_seed']}, start s {e['start_s']:.4f}, start speed {e['initial_speed_mps']:.3f} m/s")
 
     def step(self, action):
-        if self.rec is None:
+        if self._rec is None:
             raise RuntimeError("call reset() before step()")
         sim = self.sim
         assert sim is not None  # built with the first record
@@ -346,9 +422,16 @@ class KiteFigureEightEnv(gym.Env):
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {a!r}")
         a = min(1.0, max(-1.0, a))
+        if self._rec_live and self._fast_sim and self.recorder is None:
+            if self._fast_head is None:
+                self._bind_fast(self.sim)  # type: ignore[arg-type]
+            if self._fast_head is not None:
+                return self._fast_step(a)
         cfg = self.cfg
         dl_star = a * cfg.control.delta_l_max_m
-        L_B, L_D, ainfo = self.actuator.rest_lengths(dl_star, self.rec.line_length, self.rec.line_tension)
+        rec0 = self.rec
+        assert rec0 is not None  # checked above
+        L_B, L_D, ainfo = self.actuator.rest_lengths(dl_star, rec0.line_length, rec0.line_tension)
         self.L_B, self.L_D = L_B, L_D
         reason = detail = None
         # a slack tether ends the episode on a rod; the default rope goes slack and flies on (the quasi-static wing's
@@ -356,6 +439,7 @@ class KiteFigureEightEnv(gym.Env):
         slack_ends = self._slack_ends
         recorder = self.recorder
         newton = []  # Newton iterations of each physics step's FE wing (none from the surrogate)
+        live = True
         for _ in range(self.n_physics):
             t0 = time.perf_counter() if recorder is not None else 0.0
             try:
@@ -364,6 +448,7 @@ class KiteFigureEightEnv(gym.Env):
                 if self._failure_raises():  # the wing with inertia: a bug, not an end
                     raise NumericalFailure(exc, sim.t, self._conditions()) from exc
                 reason, detail = exc.reason, exc.detail
+                live = False
                 break
             self.rec = rec
             if sim.fidelity_now == "fe":
@@ -380,9 +465,10 @@ class KiteFigureEightEnv(gym.Env):
             if slack_ends and rec.tether_force < cfg.env.slack_tether_N:
                 reason = "slack tether"
                 break
+        self._rec_live = live
         self.steps += 1
         prev_action, self.last_action = self.last_action, a  # the observation holds the action just applied
-        obs, feats, finite = self._observe_finite(self.rec)
+        obs, feats, finite = self._observe_finite(self.rec)  # type: ignore[arg-type]
         if reason is None and not finite:
             if self._failure_raises():
                 raise NumericalFailure(SimulationError("non-finite state", f"observation {obs}"), sim.t,
@@ -411,6 +497,56 @@ class KiteFigureEightEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, truncated, info
+
+    def _fast_step(self, a: float):
+        """:meth:`step` of the fast fidelity from the action ``a`` (a float in [-1, 1]) in one compiled call
+        (:func:`kite_env.envs.fast_step.control_step`: the same operations, bit for bit); here the Gymnasium API."""
+        sim = self.sim
+        assert isinstance(sim, SurrogateFlightSimulator) and self._fast_head is not None and self._fast_tail is not None
+        act = self.actuator
+        L_B_prev, L_D_prev = act.last
+        obs = np.empty(self._n_obs, dtype=np.float32)
+        fs.control_step(a, self.last_action, self.s_hint, act.L_B0, act.L_D0, act.integral, L_B_prev, L_D_prev,
+                        *self._fast_head, obs, *self._fast_tail)
+        o = self._out.tolist()
+        code = int(o[fs.O_CODE])
+        L_B, L_D = o[fs.O_L_B], o[fs.O_L_D]
+        act.integral, act.last = o[fs.O_INTEGRAL], (L_B, L_D)
+        self.L_B, self.L_D = L_B, L_D
+        if code == fs.BAD_REST:  # SurrogateFlightSimulator.step's refusal; nothing was stepped
+            raise ValueError(f"steering-line rest lengths must be positive and finite, got {L_B!r}, {L_D!r}")
+        detail = None
+        if code == fs.NON_FINITE_PARTICLES or code == fs.OUTSIDE_ENVELOPE:  # SurrogateFlightSimulator._raise_status
+            ks = sim.kites
+            detail = f"t = {ks.t[0]:.4f} s" if code == fs.NON_FINITE_PARTICLES else ", ".join(ks.outside(0))
+            self.rec = sim.settle_snapshot(self._snap)
+            self._rec_live = False
+        else:
+            sim.advanced()
+            self._rec_pending = True
+        self._kcu = o[fs.O_KCU:fs.O_KCU + 3]
+        self.steps += 1
+        self.last_action = a
+        self.s_hint = o[fs.O_HINT]
+        terminated = code != fs.NONE
+        truncated = (not terminated) and self.steps >= self.max_steps
+        feats = self._feats.tolist()
+        self._tracking = feats[-1]
+        info = {"reward_tracking": o[fs.O_TRACKING], "reward_traction": o[fs.O_TRACTION],
+                "reward_action": o[fs.O_ACTION], "reward_crash": o[fs.O_CRASH]}
+        info.update(zip(INFO_FEATURES, feats))
+        info["delta_l_star_m"] = o[fs.O_DLS]
+        info["L_B_m"] = L_B
+        info["L_D_m"] = L_D
+        info["termination_reason"] = fs.REASONS[code] if terminated else ("time limit" if truncated else None)
+        info["fidelity"] = sim.fidelity_now
+        info["substepped_steps"] = self.substepped_steps
+        if detail:
+            info["termination_detail"] = detail
+        self._trail.append(self._kcu)
+        if self.render_mode == "human":
+            self.render()
+        return obs, o[fs.O_REWARD], terminated, truncated, info
 
     # ------------------------------------------------------------------ observation
     def _observe(self, rec: StepRecord):

@@ -38,6 +38,7 @@ from gymnasium.vector.utils import batch_space
 from kite_env.config import Config
 from kite_env.control import actuate, force_integral, force_ratio_error
 from kite_env.dynamics.fast import NON_FINITE, OK, SurrogateKites
+from kite_env.envs.fast_step import kite_omega_rows
 from kite_env.envs.figure_eight import (
     GROUND_ELEVATION_RAD,
     INFO_FEATURES,
@@ -231,7 +232,8 @@ class KiteFigureEightVectorEnv(VectorEnv):
         self.steps[run] += 1
         # observation of the stepped kites
         parts, feats = self._parts, self._feats
-        omega = np.matmul(ks.R, ks.X[:, 27:30, None])[..., 0]
+        omega = np.empty((n, 3))
+        kite_omega_rows(ks.R, ks.X, omega)  # the single env's omega, in the order of NumPy's product here
         v_kite = 0.5 * (ks.v[:, 0] + ks.v[:, 2])
         prev_action = self.last_action.copy()
         self.last_action[run] = a[run]  # the observation holds the action just applied

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from kite_env.config import ControlConfig
-from kite_env.control import LineActuator, _clip, actuate, force_integral, force_ratio_error
+from kite_env.control import POWER_LINES_MIN_N, LineActuator, _clip, actuate, force_integral, force_ratio_error
 from kite_env.envs.figure_eight import KiteFigureEightEnv
 from kite_env.envs.observe import FEATURES, N_PARTS
 
@@ -98,3 +98,112 @@ def test_one_kite_observation_kernel_is_the_batch_of_one():
     np.testing.assert_array_equal(env._feats, feats[0])
     np.testing.assert_array_equal(obs, parts[0, env.observer.index].astype(np.float32))
     assert list(info.values()) == feats[0, :-1].tolist()
+
+
+@pytest.mark.parametrize("changes", [{}, {"line_speed_max_mps": 0.0}, {"k3i_per_s": 0.0},
+                                     {"force_integral_max_m": 0.0}])
+def test_compiled_actuator_is_line_actuator_bit_for_bit(changes):
+    """The compiled step's actuator (fast_step.rest_lengths) against LineActuator.rest_lengths over many periods,
+    with unloaded power lines, NaN tensions and clipped commands."""
+    from kite_env.envs import fast_step as fs
+
+    cfg = dataclasses.replace(ControlConfig(), **changes)
+    act = LineActuator(cfg, 25.2, 25.3)
+    ctrl = np.zeros(10)
+    ctrl[[fs.C_DL_MAX, fs.C_K2, fs.C_K3, fs.C_K3I, fs.C_MU_TARGET, fs.C_INTEGRAL_MAX, fs.C_CONTROL_DT,
+          fs.C_LINE_SPEED_MAX, fs.C_POWER_MIN]] = (cfg.delta_l_max_m, cfg.k2, cfg.k3_m, cfg.k3i_per_s, cfg.mu_target,
+                                                  cfg.force_integral_max_m, cfg.control_dt_s, cfg.line_speed_max_mps,
+                                                  POWER_LINES_MIN_N)
+    integral, last = 0.0, (25.2, 25.3)
+    rng = np.random.default_rng(2)
+    for i in range(3000):
+        lengths = 25.2 + rng.normal(0.0, 0.3, 4)
+        T = rng.uniform(0.0, 3000.0, 4) * rng.choice([0.01, 1.0], 4)
+        if i >= 2990:
+            T[rng.integers(4)] = np.nan
+        dls = float(rng.uniform(-2.0, 2.0)) if i % 3 else float(rng.choice([-1.5, 1.5, 0.0, -0.0]))
+        L_B, L_D, info = act.rest_lengths(dls, lengths, T)
+        c_B, c_D, c_dls, integral = fs.rest_lengths(dls, ctrl, 25.2, 25.3, integral, last[0], last[1], *T.tolist(),
+                                                    float(lengths[1]), float(lengths[3]))
+        last = (c_B, c_D)
+        assert _same(L_B, c_B) and _same(L_D, c_D) and _same(info["delta_l_star"], c_dls), i
+        assert _same(float(act.integral), integral), i
+
+
+def test_compiled_omega_is_the_fma_order_of_numpys_product():
+    """kite_omega: each row fma(R[i, 2], w2, fma(R[i, 0], w0, R[i, 1] w1)), rounded once per FMA (exact rational
+    reference); on this x86-64 OpenBLAS it is NumPy's ``R @ w`` (the record's omega, the observations recorded)."""
+    from fractions import Fraction
+
+    from kite_env.envs.fast_step import kite_omega, kite_omega_rows
+
+    def fma(a, b, c):
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+    rng = np.random.default_rng(3)
+    R = rng.normal(size=(400, 3, 3))
+    X = rng.normal(size=(400, 30)) * 10.0 ** rng.integers(-3, 3, size=(400, 1))
+    rows = np.empty((400, 3))
+    kite_omega_rows(R, X, rows)
+    one = np.empty(3)
+    for k in range(400):
+        kite_omega(R[k], X[k, 27:30], one)
+        w = X[k, 27:30].tolist()
+        ref = [fma(R[k, i, 2], w[2], fma(R[k, i, 0], w[0], R[k, i, 1] * w[1])) for i in range(3)]
+        assert one.tolist() == ref and rows[k].tolist() == ref, k
+    if not np.array_equal(rows, np.matmul(R, X[:, 27:30, None])[..., 0]):
+        pytest.skip("this machine's BLAS sums a 3 x 3 product in another order than the one the flights were "
+                    "recorded with (the compiled form is the same on every machine)")
+
+
+def _fast_and_python_steps(overrides, actions, seed, monkeypatch):
+    """The same episode stepped by the compiled step and by the Python step (the compiled step unbound)."""
+    out = []
+    for compiled in (True, False):
+        env = KiteFigureEightEnv(fidelity="surrogate", overrides=overrides)
+        if not compiled:
+            monkeypatch.setattr(env, "_bind_fast", lambda sim: None)
+        env.reset(seed=seed)
+        env.step(np.array([0.0], np.float32))
+        assert (env._fast_head is not None) == compiled
+        steps: list = []
+        ended = False
+        for a in actions:
+            obs, reward, terminated, truncated, info = env.step(np.array([a], np.float32))
+            rec = env.rec
+            assert rec is not None and env.sim is not None
+            steps.append((obs.tobytes(), reward, terminated, truncated, sorted((k, repr(v)) for k, v in info.items()),
+                          env.s_hint, env.actuator.integral, env.actuator.last, env.L_B, env.L_D, env._kcu,
+                          env._trail[-1], rec.t, rec.state.r.tobytes(), rec.state.v.tobytes(), rec.omega.tobytes(),
+                          rec.R_wk.tobytes(), rec.line_tension.tobytes(), rec.line_length.tobytes(), rec.tether_force,
+                          rec.tether_length, rec.reel_speed, rec.wing.F_b.tobytes(), env.sim.t,
+                          env.sim.state.r.tobytes()))
+            if ended:  # one step after the end (Gymnasium leaves it undefined; the env steps on)
+                break
+            ended = terminated or truncated
+        out.append(steps)
+    return out
+
+
+@pytest.mark.parametrize("case", ["steer", "ground", "outside"])
+def test_compiled_step_is_the_python_step(case, monkeypatch):
+    """The compiled control step (kite_env.envs.fast_step) and the env's Python step give the same observations,
+    rewards, ends, info, records and actuator states, bit for bit: in flight, on the ground, beyond the surrogate's
+    envelope (the failed physics step: the last good state observed), and in the step after the end."""
+    if case == "steer":
+        rng = np.random.default_rng(4)
+        actions = (0.4 * np.sin(0.05 * np.arange(200)) + rng.uniform(-0.3, 0.3, 200)).tolist()
+        seed, over = 0, ["wind.turbulence_intensity=0.1"]
+    elif case == "ground":  # on the ground after some 270 steps
+        actions, seed, over = [0.15] * 400, 0, []
+    else:  # beyond the envelope after some 125 steps
+        actions, seed, over = [1.0] * 300, 40, []
+    fast, python = _fast_and_python_steps(over, actions, seed, monkeypatch)
+    assert len(fast) == len(python)
+    for i, (f, p) in enumerate(zip(fast, python)):
+        assert f == p, i
+    if case != "steer":
+        info_end = dict(fast[-2][4])
+        assert fast[-2][2], "the episode ends"
+        assert info_end["termination_reason"] == repr({"ground": "ground", "outside": "outside surrogate envelope"}[
+            case])
