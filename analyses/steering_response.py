@@ -51,20 +51,14 @@ def response(fidelity: str, f_hz: float, amplitude: float, wind_mps: float, reco
                                         f"env.max_episode_s={duration + 1.0}", *overrides], fidelity=fidelity)
     agent = BaselineAgent(env.cfg)
     obs, _ = env.reset(seed=0)
-    if depower:
-        loop = env.actuator.force_increment
-
-        def injected(line_tension):  # the force loop's output plus the sinusoid, at this controller period's time
-            L3, mu = loop(line_tension)
-            return L3 + amplitude * math.sin(2.0 * math.pi * f_hz * env.steps * env.control_dt), mu
-
-        env.actuator.force_increment = injected
     start, rows = True, []
     while True:
         a, _ = agent.predict(obs, episode_start=start)
         start = False
         t = env.steps * env.control_dt
-        if not depower:
+        if depower:  # on top of the force loop's common increment (LineActuator.depower_offset_m)
+            env.actuator.depower_offset_m = amplitude * math.sin(2.0 * math.pi * f_hz * t)
+        else:
             a = np.clip(a + amplitude * math.sin(2.0 * math.pi * f_hz * t), -1.0, 1.0).astype(np.float32)
         obs, _, term, trunc, info = env.step(a)
         u_in = 0.5 * (info["L_B_m"] + info["L_D_m"]) if depower else info["delta_l_m"]

@@ -70,6 +70,10 @@ class LineActuator:
         self.L_D0 = float(L_D0)
         self.integral = 0.0  # I = int (mu* - mu) dt [s], see the module docstring
         self.last = (self.L_B0, self.L_D0)  # rest lengths of the last period (the actuator's speed limit)
+        #: an exogenous common offset of both steering lines [m] on top of the force loop (0: the paper's actuator):
+        #: the excitation of depower that identification needs (kite_env.fitting.trajectories.HeldDepower) and the
+        #: input of the depower response (analyses/steering_response.py); set before each controller period
+        self.depower_offset_m = 0.0
 
     @staticmethod
     def force_ratio(line_tension: np.ndarray) -> float:
@@ -111,8 +115,11 @@ class LineActuator:
         dl = l1 - l3  # Delta l = l_B - l_D (Sect. III.A)
         L3, mu = self.force_increment(line_tension)
         e = dls - dl
-        L_B = self.L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
-        L_D = self.L_D0 - cfg.k2 * e + L3  # Eq. (17)
+        L_B0, L_D0 = self.L_B0, self.L_D0
+        if self.depower_offset_m:
+            L_B0, L_D0 = L_B0 + self.depower_offset_m, L_D0 + self.depower_offset_m
+        L_B = L_B0 + cfg.k2 * e + L3  # Eq. (16), sign closing the loop (module docstring)
+        L_D = L_D0 - cfg.k2 * e + L3  # Eq. (17)
         if cfg.line_speed_max_mps > 0.0:  # actuate() in float arithmetic
             step = cfg.line_speed_max_mps * cfg.control_dt_s
             L_B_prev, L_D_prev = self.last

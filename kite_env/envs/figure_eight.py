@@ -506,7 +506,10 @@ class KiteFigureEightEnv(gym.Env):
         act = self.actuator
         L_B_prev, L_D_prev = act.last
         obs = np.empty(self._n_obs, dtype=np.float32)
-        fs.control_step(a, self.last_action, self.s_hint, act.L_B0, act.L_D0, act.integral, L_B_prev, L_D_prev,
+        L_B0, L_D0 = act.L_B0, act.L_D0
+        if act.depower_offset_m:  # as LineActuator.rest_lengths
+            L_B0, L_D0 = L_B0 + act.depower_offset_m, L_D0 + act.depower_offset_m
+        fs.control_step(a, self.last_action, self.s_hint, L_B0, L_D0, act.integral, L_B_prev, L_D_prev,
                         *self._fast_head, obs, *self._fast_tail)
         o = self._out.tolist()
         code = int(o[fs.O_CODE])

@@ -138,33 +138,27 @@ class HeldNoise:
 
 
 class HeldDepower:
-    """Held random offsets on the force loop's common increment L3 (Eq. 16-17; ``kite_env.control``): uniform in
-    ``[-amp, amp]`` [m], each held ``hold_s`` (uniform in the given range) [s], added to what the loop asks.
+    """Held random offsets on the common length of both steering lines (``LineActuator.depower_offset_m``, on top of
+    the force loop's L3, Eq. 16-17): uniform in ``[-amp, amp]`` [m], each held ``hold_s`` (uniform in the given
+    range) [s].
 
     Why: in a flight of the paper's controller the force loop sets the common length of the steering lines from the
     force ratio mu, so recorded flights tie the wing's depower shape to the load that moved it, and a wing fitted to
     them cannot tell cause from effect; it answers depower several times too strongly (docs/fast_fidelity.md, "Why
     the fast kite leaves its envelope at low wind"). An excitation the loop does not make, added to the controller's
     output, makes the closed loop's data informative (Ljung, System Identification: Theory for the User, 2nd ed.,
-    1999, Ch. 13). ``attach(actuator)`` after each reset (the env builds a new actuator)."""
+    1999, Ch. 13). ``update(actuator)`` once per controller period, before the env's step."""
 
     def __init__(self, amp: float, hold_s: tuple[float, float], control_dt: float, rng: np.random.Generator):
         self.amp, self.hold, self.dt, self.rng = float(amp), hold_s, float(control_dt), rng
         self._left, self.offset = 0.0, 0.0
 
-    def attach(self, actuator) -> None:
-        loop = actuator.force_increment
-
-        def force_increment(line_tension):  # one call per controller period
-            if self._left <= 0.0:
-                self.offset = float(self.rng.uniform(-self.amp, self.amp))
-                self._left = float(self.rng.uniform(*self.hold))
-            self._left -= self.dt
-            L3, mu = loop(line_tension)
-            return L3 + self.offset, mu
-
-        self._left = 0.0
-        actuator.force_increment = force_increment
+    def update(self, actuator) -> None:
+        if self._left <= 0.0:
+            self.offset = float(self.rng.uniform(-self.amp, self.amp))
+            self._left = float(self.rng.uniform(*self.hold))
+        self._left -= self.dt
+        actuator.depower_offset_m = self.offset
 
 
 @dataclass
@@ -311,13 +305,13 @@ def fly_plan(plan: EpisodePlan, base_overrides=(), tape: FlightTape | None = Non
         agent.seed_episode(plan.seed)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=plan.seed)
-    if depower is not None:
-        depower.attach(env.actuator)
     start, done, reason, info = True, False, None, dict(info)
     while not done:
         act, _ = agent.predict(obs, episode_start=np.array([start]), deterministic=True)
         start = False
         tape.set_action(float(np.asarray(act).ravel()[0]))
+        if depower is not None:
+            depower.update(env.actuator)
         obs, _, term, trunc, step_info = env.step(act)
         info.update(step_info)
         done = term or trunc

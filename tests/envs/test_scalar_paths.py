@@ -207,3 +207,31 @@ def test_compiled_step_is_the_python_step(case, monkeypatch):
         assert fast[-2][2], "the episode ends"
         assert info_end["termination_reason"] == repr({"ground": "ground", "outside": "outside surrogate envelope"}[
             case])
+
+
+def test_the_depower_offset_moves_both_lines_in_both_step_paths(monkeypatch):
+    """``LineActuator.depower_offset_m`` (an exogenous common offset of the steering lines): the compiled step of the
+    fast env and the Python step apply it alike, bit for bit; zero is the paper's actuator; an offset moves both rest
+    lengths by the same amount, at most the actuator's speed limit per controller period, and the force loop answers
+    it only in part."""
+    def fly(offset, compiled):
+        env = KiteFigureEightEnv(fidelity="surrogate")
+        if not compiled:
+            monkeypatch.setattr(env, "_bind_fast", lambda sim: None)
+        env.reset(seed=3)
+        rows = []
+        for k in range(60):
+            env.actuator.depower_offset_m = offset if k >= 10 else 0.0
+            obs, reward, term, trunc, info = env.step(np.array([0.2], dtype=np.float32))
+            rows.append((info["L_B_m"], info["L_D_m"], reward, *obs.tolist()))
+            assert not term
+        assert (env._fast_head is not None) == compiled
+        return np.array(rows), env.cfg.control
+
+    (base, cfg), (base_py, _) = fly(0.0, True), fly(0.0, False)
+    (off, _), (off_py, _) = fly(0.05, True), fly(0.05, False)
+    assert np.array_equal(base, base_py) and np.array_equal(off, off_py)
+    assert np.array_equal(base[:10], off[:10])
+    common = 0.5 * (off[:, 0] + off[:, 1]) - 0.5 * (base[:, 0] + base[:, 1])
+    assert common[10] > 0 and np.all(np.abs(np.diff(common)) <= 2 * cfg.line_speed_max_mps * cfg.control_dt_s)
+    assert 0.005 < np.mean(common[30:]) < 0.05
