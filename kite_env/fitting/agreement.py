@@ -99,13 +99,15 @@ def _cached(folder: Path, name: str, model: dict, compute):
 
 
 def _config(model: dict):
-    from kite_env.config import config_from_dict
+    """The config of a model record (:func:`kite_env.config.fingerprint`: its keys hold the retired ones at their one
+    value, which a config no longer takes)."""
+    from kite_env.config import config_from_dict, without_retired
 
     data: dict = {}
     for key, value in model["keys"].items():
         s, k = key.split(".")
         data.setdefault(s, {})[k] = value
-    return config_from_dict(data)
+    return config_from_dict(without_retired(data))
 
 
 def _slug(text: str) -> str:

@@ -445,3 +445,20 @@ def test_the_fast_fidelity_agrees_with_the_full_model_over_a_turbulent_flight():
     assert full["end"] == fast["end"] == "completed"
     assert abs(fast["traction_mean_N"] / full["traction_mean_N"] - 1.0) < TRACTION_REL
     assert abs(fast["tracking_rms_deg"] - full["tracking_rms_deg"]) < TRACKING_DEG
+
+
+def test_the_agreement_reads_back_its_full_model_results(tmp_path):
+    """kite-fit agreement keeps the full model's flights (``OUT/fe``) and reads them back on the next comparison: a
+    result kept for this model is returned without flying (its record holds the retired keys at their one value),
+    one kept for another model is refused naming the key."""
+    import json
+
+    from kite_env.fitting.agreement import _cached
+
+    model = fingerprint(load_config(None, []))
+    assert _cached(tmp_path, "flight", model, lambda: {"traction": 1.0}) == {"traction": 1.0}
+    assert _cached(tmp_path, "flight", model, lambda: pytest.fail("flown again")) == {"traction": 1.0}
+    other = fingerprint(load_config(None, ["wind.speed_mps=4.0", "kite.n_sections=25"]))
+    (tmp_path / "other.json").write_text(json.dumps({"model": other, "result": {}}))
+    with pytest.raises(ModelMismatch, match="kite.n_sections"):
+        _cached(tmp_path, "other", model, lambda: pytest.fail("flown"))
