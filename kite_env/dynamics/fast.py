@@ -755,7 +755,7 @@ class SurrogateKites:
         self._winch = np.array([1.0 if dyn.winch == "force" else 0.0, dyn.winch_force_N, dyn.winch_damping_Ns_per_m,
                                 dyn.winch_speed_max_mps, dyn.winch_time_constant_s])
         self.status = np.zeros(n, dtype=np.int64)
-        self._all = np.ones(n, dtype=np.bool_)
+        self.all_kites = np.ones(n, dtype=np.bool_)  #: every kite active (the default of step and evaluate)
         self._bind_step_args()
 
     def _bind_step_args(self) -> None:
@@ -833,7 +833,7 @@ class SurrogateKites:
     def evaluate(self, active: np.ndarray | None = None) -> None:
         """Wing outputs, bridle lines and status at the current states of the ``active`` kites (default all), e.g.
         after :meth:`set_kite`."""
-        active = self._all if active is None else np.asarray(active, dtype=np.bool_)
+        active = self.all_kites if active is None else np.asarray(active, dtype=np.bool_)
         evaluate_kites(self.t, self.r, self.v, self.rest, self.q_design, self.wind_f, self.wind_i, self.wavevec_t,
                        self.phase0, self.omega_m, self.amp, self.n_modes, *self._weights, self.k_c, self.c_c,
                        self._lo, self._hi, active, self.X, self.Y, self.wind, self.turb, self.R, self.tension,
@@ -849,7 +849,7 @@ class SurrogateKites:
         """Advance every ``active`` (default all) kite by ``dt`` with steering-line rest lengths ``L_B``, ``L_D``
         (n,) [m]: RK4 with the wing evaluated at every stage, then the projection. Returns ``status`` (n,)."""
         if active is None:
-            active = self._all
+            active = self.all_kites
             if self.n == 1 and type(L_B) is float and type(L_D) is float:  # one kite: two element stores
                 self.rest[0, 1] = L_B
                 self.rest[0, 3] = L_D

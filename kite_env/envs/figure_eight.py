@@ -279,7 +279,7 @@ class KiteFigureEightEnv(gym.Env):
             self.n_physics, _SIN_GROUND, 1.0 if self._slack_ends else 0.0, e.slack_tether_N, e.w_tracking,
             e.w_traction, e.traction_ref_N, e.w_action_rate, e.crash_penalty)
         (samples, s_samples, window, ds, path_a, path_b, rot, force_scale, dl_max,
-         tracking_scale) = self.observer._consts
+         tracking_scale) = self.observer.consts
         ks = sim.kites
         kf, ki, kw, klay = ks.pack()
         parts = {"ctrl": ctrl, "envp": envp, "samples": samples, "s_samples": s_samples, "rot": rot,
@@ -299,7 +299,7 @@ class KiteFigureEightEnv(gym.Env):
         ei = np.array([len(s_samples), self._snap.size, *offsets, *self.observer.index], dtype=np.int64)
         ew = np.concatenate([self.observation_space.low, self.observation_space.high]).astype(np.float32)
         self._fast_head = (ef, ei, ew)
-        self._fast_tail = (ks.dt, ks._all, kf, ki, kw, klay)
+        self._fast_tail = (ks.dt, ks.all_kites, kf, ki, kw, klay)
         # numba loads the kernel from its cache (or compiles it) at its first call, some 0.1 s: here, with the reset,
         # and not in the first step. A dry call: rest lengths of -inf are refused before anything is stepped (it
         # writes only the scratch ``out``)

@@ -314,7 +314,9 @@ class Observer:
         self.samples = np.ascontiguousarray(path.samples, dtype=float)
         self.s_samples = np.ascontiguousarray(path.s_samples, dtype=float)
         self.window = int(HINT_WINDOW / path.ds)
-        self._consts = (self.samples, self.s_samples, self.window, float(path.ds), float(path.a), float(path.b),
+        #: the path and scales in the order of observe_one's arguments after ``last_action`` (the compiled step
+        #: of the single fast env takes them too, kite_env.envs.fast_step)
+        self.consts = (self.samples, self.s_samples, self.window, float(path.ds), float(path.a), float(path.b),
                         np.ascontiguousarray(path.rotation, dtype=float),
                         float(cfg.env.force_scale_N), float(cfg.control.delta_l_max_m),
                         math.radians(cfg.env.tracking_scale_deg))
@@ -323,9 +325,9 @@ class Observer:
                  parts, feats):
         """:func:`observe_kites` with this path and these scales (arguments as there)."""
         observe_kites(active, r_kcu, v_kcu, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action,
-                      *self._consts, parts, feats)
+                      *self.consts, parts, feats)
 
     def one(self, r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, parts, feats, obs):
         """:func:`observe_one` with this path, these scales and the observation's ``index`` (arguments as there)."""
-        return observe_one(r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, *self._consts,
+        return observe_one(r, v, R_wk, omega, v_kite, tension, length, tether, t, s_hint, last_action, *self.consts,
                            self.index, parts, feats, obs)
