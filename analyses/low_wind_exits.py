@@ -2,13 +2,13 @@
 with the force loop (Eq. 19 and its integral) on, and off.
 
 At 4.5 m/s with turbulence 0.1 the fast kite flown by the paper's controller leaves its envelope in about half of
-the 120 s flights, while the full model completes them all; the reduced-order wing answers a change of the common
-steering-line length (the force loop's depower actuation) several times more strongly than the wing with inertia
-(``analyses/steering_response.py --input depower``), so the loop that holds the force ratio drives a pitch swing
-instead. ``--force-loop off`` holds the common length at its start value (``control.k3_m = k3i_per_s = 0``): a
-diagnosis only. The force loop's gains are part of the model's record, so the shipped wing refuses that config; this
-script accepts that one mismatch on purpose and says so in its output (docs/fast_fidelity.md, "Where it falls
-short").
+the 120 s flights, while the full model completed each of them it flew (seeds 50000-50007); the reduced-order wing
+answers a change of the common steering-line length (the force loop's depower actuation) several times more
+strongly than the wing with inertia (``analyses/steering_response.py --input depower``), so the loop that holds the
+force ratio drives a pitch swing instead. ``--force-loop off`` holds the common length at its start value
+(``control.k3_m = k3i_per_s = 0``): a diagnosis only. The force loop's gains are part of the model's record, so the
+shipped wing refuses that config; this script accepts that one mismatch on purpose and says so in its output
+(docs/fast_fidelity.md, "Where it falls short").
 
     .venv/bin/python analyses/low_wind_exits.py [--winds 4.5,5.5] [--episodes 20] [--seed 50000]
         [--duration 120] [--force-loop on|off] [--set SECTION.KEY=VALUE ...]
