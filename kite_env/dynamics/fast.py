@@ -1005,28 +1005,28 @@ class SurrogateFlightSimulator(FlightSimulator):
 
     # ``state`` and ``t`` (FlightSimulator's attributes): the last record's, built from the kites' arrays when read
     # after a compiled control step (:meth:`advanced`), which makes no record
-    @property
-    def state(self):
+    def _fresh(self) -> None:
         if self._stale:
             self._settle(self._record())
+
+    @property
+    def state(self):
+        self._fresh()
         return self._state
 
     @state.setter
     def state(self, value):
-        if self._stale:
-            self._settle(self._record())
+        self._fresh()
         self._state = value
 
     @property
     def t(self):
-        if self._stale:
-            self._settle(self._record())
+        self._fresh()
         return self._t
 
     @t.setter
     def t(self, value):
-        if self._stale:
-            self._settle(self._record())
+        self._fresh()
         self._t = value
 
     def _settle(self, rec):

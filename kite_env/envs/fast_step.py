@@ -18,7 +18,7 @@ the observations NumPy gave, and the batched env (:mod:`kite_env.envs.vector`) c
 function, so that the batch and the single env agree on any machine, whatever its BLAS.
 
 numba's cache is keyed on this file: a change of a kernel it calls in another file (``step_kites``,
-``_observe_kite``) needs this file's cache cleared as well (:mod:`kite_env.compiled`).
+``observe_one``) needs this file's cache cleared as well (:mod:`kite_env.compiled`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 
 from kite_env.compiled import JIT, fma, njit
 from kite_env.dynamics.fast import NON_FINITE, OK, kite_views, step_kites_with, step_work
-from kite_env.envs.observe import _observe_kite
+from kite_env.envs.observe import observe_one
 
 #: ``code`` of :func:`control_step` (``out[0]``): how the step ended
 NONE, GROUND, SLACK, NON_FINITE_PARTICLES, OUTSIDE_ENVELOPE, NON_FINITE_OBS, BAD_REST = 0, 1, 2, 3, 4, 5, 6
@@ -231,21 +231,13 @@ def control_step_of(a, prev_action, s_hint, L_B0, L_D0, integral, L_B_prev, L_D_
         tf, tk = snap[S_TETHER], snap[S_T]
     om = np.empty(3)
     kite_omega(Rs, Xs[27:30], om)
-    vk0 = 0.5 * (vs[0, 0] + vs[2, 0])
-    vk1 = 0.5 * (vs[0, 1] + vs[2, 1])
-    vk2 = 0.5 * (vs[0, 2] + vs[2, 2])
-    mw = np.empty((3, 3))
-    cw = np.empty((3, 3))
-    out[O_HINT] = _observe_kite(rs[4, 0], rs[4, 1], rs[4, 2], vs[4, 0], vs[4, 1], vs[4, 2], -Rs[0, 0], -Rs[1, 0],
-                                -Rs[2, 0], Rs[0, 2], Rs[1, 2], Rs[2, 2], om[0], om[1], om[2], vk0, vk1, vk2, Ts[0],
-                                Ts[1], Ts[2], Ts[3], ls[1], ls[3], tf, tk, s_hint, a, samples, s_samples, window, ds,
-                                path_a, path_b, rot, force_scale, dl_max, tracking_scale, mw, cw, parts, feats)
-    finite = True
-    for i in range(index.shape[0]):
-        q = np.float32(parts[index[i]])
-        obs[i] = q
-        if not math.isfinite(q):
-            finite = False
+    vk = np.empty(3)
+    vk[0] = 0.5 * (vs[0, 0] + vs[2, 0])
+    vk[1] = 0.5 * (vs[0, 1] + vs[2, 1])
+    vk[2] = 0.5 * (vs[0, 2] + vs[2, 2])
+    out[O_HINT], finite = observe_one(rs, vs, Rs, om, vk, Ts, ls, tf, tk, s_hint, a, samples, s_samples, window, ds,
+                                      path_a, path_b, rot, force_scale, dl_max, tracking_scale, index, parts, feats,
+                                      obs)
     if code == NONE and not finite:
         code = NON_FINITE_OBS
     out[O_CODE] = code
