@@ -3,6 +3,7 @@
     kite-fit sample --out DIR [--episodes N] [--seed S] [--jobs J] [--starts | --agent POLICY] [--config FILE]
                     [--set SECTION.KEY=VALUE ...]
     kite-fit fit --tapes DIR --out FILE.npz [--hidden 128,128] [--epochs 150] [--seed 0] [--config FILE] [--set ...]
+    kite-fit slopes --tapes DIR [--every-s 1.0] [--jobs J] [--config FILE] [--set ...]
     kite-fit agreement --out DIR [--surrogate FILE.npz] [--episodes 50] [--jobs J] [--quick]
     kite-fit start-table --out FILE_start.npz [--s-grid 16:58:3] [--w-grid -11:-2:1] [--config FILE] [--set ...]
 
@@ -13,6 +14,10 @@ writes its weights with the model they belong to, the held-out errors and the co
 the full model's start (:mod:`kite_env.surrogate.start`) for the reset of the fast fidelity; it belongs next to the
 weights as ``<stem>_start.npz``. Use the result with ``--set sim.surrogate_path=FILE.npz``, or install both into
 ``kite_env/surrogate/data/<kite>.npz`` and ``<kite>_start.npz``.
+
+``slopes`` solves the static aeroelastic wing at recorded states of the tapes (every ``--every-s`` seconds of each
+flight) for its force derivatives there (:mod:`kite_env.fitting.jacobians`), into ``DIR/jacobians/``; ``fit
+--slope-weight W`` then fits the wing's slopes to them beside its forces.
 
 ``agreement`` flies the paper's controller and random steering in both fidelities and prints the comparison
 (:mod:`kite_env.fitting.agreement`); the full model's flights are kept in ``DIR/fe`` for the next comparison.
@@ -87,8 +92,24 @@ def _fit(args) -> int:
         raise ValueError(f"--out must be a .npz file, got '{args.out}'")
     if args.replay_s <= 0 or args.replay_every_s <= 0:
         raise ValueError(f"--replay-s and --replay-every-s must be > 0, got {args.replay_s} and {args.replay_every_s}")
+    if args.slope_weight < 0:
+        raise ValueError(f"--slope-weight must be >= 0, got {args.slope_weight}")
+    slope_names = None
+    if args.slope_directions is not None:
+        from kite_env.fitting.fit import _picked
+
+        slope_names = [n.strip() for n in args.slope_directions.split(",") if n.strip()]
+        _picked(slope_names)  # one line naming an unknown direction, before anything is read
     wing = nominal_wing(cfg.kite.name, cfg)
     data = build_dataset(args.tapes, cfg, wing, log=lambda m: print(m, flush=True))
+    slopes = None
+    if args.slope_weight > 0:
+        from kite_env.fitting.jacobians import load_jacobians
+
+        slopes = load_jacobians(args.tapes, cfg, {ep["index"] for ep in data.meta["episodes"]})
+        if slopes is None:
+            raise FileNotFoundError(f"--slope-weight needs the slopes of the tapes: run kite-fit slopes --tapes "
+                                    f"{args.tapes}")
     K_b = reference_stiffness(cfg)
     meta = {"model": fingerprint(cfg), "history": {"taus_s": list(TAUS), "filtered": list(FILTERED), "inertial": True},
             "kite": cfg.kite.name, "n_sections": int(len(wing.mesh.sections)), "git_commit": git_commit(),
@@ -104,7 +125,9 @@ def _fit(args) -> int:
                                                      np.concatenate([data.group, *extra_g]), data.meta)
         W, b, (xm, xs, ym, ys, lo, hi), report = fit_mlp(fit_data, hidden=hidden, epochs=args.epochs,
                                                          batch=args.batch, lr=args.lr, holdout=args.holdout,
-                                                         seed=args.seed, K_b=K_b, log=lambda m: print(m, flush=True))
+                                                         seed=args.seed, K_b=K_b, slopes=slopes,
+                                                         slope_weight=args.slope_weight, slope_names=slope_names,
+                                                         log=lambda m: print(m, flush=True))
         sw = SurrogateWing(W, b, xm, xs, ym, ys, lo, hi, {**meta, "held_out": report, "rounds": rnd,
                                                           "n_samples": int(len(fit_data.inputs))}, K_b)
         print(f"kite-fit: round {rnd}: bridle-force RMS error {report['force_rms_N']:.1f} N on held-out flights "
@@ -134,6 +157,31 @@ def _fit(args) -> int:
     print(json.dumps({k: v for k, v in report.items() if k != "rms"}))
     print(f"kite-fit: bridle-force RMS error {report['force_rms_N']:.1f} N = "
           f"{100 * report['force_rms_rel_traction']:.2f} % of the mean traction on held-out flights -> {args.out}")
+    return 0
+
+
+def _slopes_worker(args):
+    tapes, overrides, every_s = args
+    from kite_env.config import load_config
+    from kite_env.fitting.jacobians import compute_jacobians
+
+    return compute_jacobians(None, load_config(None, overrides), every_s, tapes=tapes,
+                             log=lambda m: print(m, flush=True))
+
+
+def _slopes(args, over) -> int:
+    if args.every_s <= 0 or args.jobs < 1:
+        raise ValueError(f"--every-s must be > 0 and --jobs at least 1, got {args.every_s} and {args.jobs}")
+    tapes = [p for p in sorted(Path(args.tapes).glob("ep_*.npz")) if not p.name.endswith(".part.npz")]
+    if not tapes:
+        raise FileNotFoundError(f"no tapes (ep_*.npz) in '{args.tapes}'")
+    parts = [tapes[j::args.jobs] for j in range(args.jobs)]
+    if args.jobs == 1:
+        done = _slopes_worker((parts[0], over, args.every_s))
+    else:
+        with mp.get_context("spawn").Pool(args.jobs) as pool:
+            done = sum(pool.map(_slopes_worker, [(part, over, args.every_s) for part in parts]))
+    print(f"kite-fit: slopes of {done} tapes (of {len(tapes)}) -> {Path(args.tapes) / 'jacobians'}")
     return 0
 
 
@@ -200,8 +248,19 @@ def main(argv=None) -> int:
                    "a training flight [s]")
     f.add_argument("--dense-below-mps", type=float, default=0.0, help="flights in wind below this [m/s] get replays "
                    "twice as often (0: none)")
+    f.add_argument("--slope-weight", type=float, default=0.0, help="weight of the wing's slopes against the static "
+                   "wing's (kite-fit slopes; 0: the forces alone)")
+    f.add_argument("--slope-directions", default=None, help="comma-separated names of the slopes to fit (kite_env."
+                   "fitting.fit.SLOPE_DIRECTIONS; default: all)")
     f.add_argument("--config", default=None)
     f.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    j = sub.add_parser("slopes", help="the static wing's force derivatives at recorded states, targets of the fit's "
+                       "slopes")
+    j.add_argument("--tapes", required=True, type=Path)
+    j.add_argument("--every-s", type=float, default=1.0, help="one state every this many seconds of flight")
+    j.add_argument("--jobs", type=int, default=1)
+    j.add_argument("--config", default=None)
+    j.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     t = sub.add_parser("start-table", help="tabulate the full model's start for the fast fidelity's reset")
     t.add_argument("--out", required=True, type=Path)
     t.add_argument("--s-grid", default="16:58:3", help="tangential apparent speed lo:hi:step [m/s]")
@@ -226,6 +285,8 @@ def main(argv=None) -> int:
         over = _overrides(args)
         if args.cmd == "fit":
             return _fit(args)
+        if args.cmd == "slopes":
+            return _slopes(args, over)
         if args.cmd == "start-table":
             return _start_table(args)
         if args.cmd == "agreement":

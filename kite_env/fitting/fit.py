@@ -139,12 +139,82 @@ def build_dataset(tape_dir: str | Path, cfg, wing, taus=TAUS, accel: str = "cent
                    {"episodes": eps, "taus_s": list(taus), "accel": accel, "every": every})
 
 
+def _q(point: str, axis: str) -> int:
+    return "ABCD".index(point) * 3 + "xyz".index(axis)
+
+
+#: the directions of the wing's slopes fitted with ``slopes`` (rows: weights on :data:`kite_env.surrogate.samples.
+#: INPUT_NAMES`' first 30; names): the bridle points' deformations that keep frame K (A and C stay on its y axis
+#: symmetric about the origin, the midpoint of B and D in its x-y plane: :func:`kite_env.frames.kite_frame`; any
+#: other change of q_b also moves K, and the inputs, which are in K, cannot take it) and the apparent velocity
+SLOPE_DIRECTIONS: tuple[tuple[dict[int, float], str], ...] = (
+    ({_q("A", "y"): 1.0, _q("C", "y"): -1.0}, "span"),
+    ({_q("B", "x"): 1.0}, "B_x"), ({_q("B", "y"): 1.0}, "B_y"),
+    ({_q("D", "x"): 1.0}, "D_x"), ({_q("D", "y"): 1.0}, "D_y"),
+    ({_q("B", "z"): 1.0, _q("D", "z"): -1.0}, "twist"),
+    ({24: 1.0}, "v_app_x"), ({25: 1.0}, "v_app_y"), ({26: 1.0}, "v_app_z"),
+)
+
+
+def _picked(names) -> list[int]:
+    known = [n for _, n in SLOPE_DIRECTIONS]
+    if names is None:
+        return list(range(len(known)))
+    bad = [n for n in names if n not in known]
+    if bad or not names:
+        raise ValueError(f"unknown slope direction(s) {bad or names}; known: {', '.join(known)}")
+    return [known.index(n) for n in names]
+
+
+def slope_directions(n_in: int, names=None) -> np.ndarray:
+    """(d, n_in) the directions of :data:`SLOPE_DIRECTIONS` (those named in ``names``; None: all) in the raw inputs
+    (only current inputs: the latent filters' differences ``z - x`` stay, as at a steady state)."""
+    picked = _picked(names)
+    U = np.zeros((len(picked), n_in))
+    for d, k in enumerate(picked):
+        for i, v in SLOPE_DIRECTIONS[k][0].items():
+            U[d, i] = v
+    return U
+
+
+def _direction_scale(x_std: np.ndarray, names=None) -> np.ndarray:
+    """(d,) the length of each direction: one standard deviation of its first input over the samples."""
+    return np.array([x_std[next(iter(SLOPE_DIRECTIONS[k][0]))] for k in _picked(names)])
+
+
+def slope_tangents(x_std: np.ndarray, n_in: int, names=None) -> np.ndarray:
+    """(d, n_in) the directions in normalised inputs, each one standard deviation of its first input long."""
+    return slope_directions(n_in, names) * _direction_scale(x_std, names)[:, None] / x_std[None, :]
+
+
+def slope_targets(slopes: dict, K_b, x_mean, x_std, y_std, holdout: int, names=None):
+    """The normalised slope targets of the MLP: ``(inputs (m, n_in) normalised, targets (m, d, 12), held_out (m,))``,
+    the static wing's derivatives along the directions less the known linear part's, per direction length
+    (:func:`slope_tangents`) and per output standard deviation."""
+    from kite_env.fitting.jacobians import JAC_INPUTS
+
+    X = slopes["inputs"]
+    U = slope_directions(X.shape[1], names)[:, list(JAC_INPUTS)]  # (d, 15)
+    T = np.einsum("mij,dj->mdi", slopes["J"], U)
+    if K_b is not None:
+        T = T - (U[:, :12] @ np.asarray(K_b).T)[None, :, :]
+    T = T * _direction_scale(x_std, names)[None, :, None] / y_std[None, None, :12]
+    return (X - x_mean) / x_std, T, (slopes["group"] % holdout) == holdout - 1
+
+
 def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048, lr: float = 2e-3,
-            holdout: int = 5, seed: int = 0, K_b: np.ndarray | None = None, log=print):
+            holdout: int = 5, seed: int = 0, K_b: np.ndarray | None = None, slopes: dict | None = None,
+            slope_weight: float = 0.0, slope_names=None, log=print):
     """Fit a tanh MLP (normalised inputs and outputs, Adam, mini-batches, the learning rate halved on a plateau of
     the held-out loss; the epoch with the lowest held-out loss kept) to the outputs less the known linear part
     ``K_b (q_b - q_design)`` of the bridle force. Every ``holdout``-th episode is held out. Returns
-    ``(weights, biases, norms, report)``; the report's errors are those of the whole model (MLP and linear part)."""
+    ``(weights, biases, norms, report)``; the report's errors are those of the whole model (MLP and linear part).
+
+    ``slopes`` (:func:`kite_env.fitting.jacobians.load_jacobians`) with ``slope_weight`` > 0 adds the wing's slopes
+    to the loss: the bridle force's derivatives along :data:`SLOPE_DIRECTIONS` at those states against the static
+    wing's (:mod:`kite_env.fitting.jacobians`), each per standard deviation of its input over the samples and per
+    standard deviation of the force, weighed ``slope_weight`` against the forces' mean square; ``slope_names``: only
+    the directions of these names (None: all)."""
     import torch
 
     torch.manual_seed(seed)
@@ -169,8 +239,34 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=10)
     vm = torch.from_numpy(val)
     x_tr, y_tr, x_va, y_va = xt[~vm], yt[~vm], xt[vm], yt[vm]
+    use_slopes = slopes is not None and slope_weight > 0.0
+    if use_slopes:
+        assert slopes is not None
+        sx, sT, sval = slope_targets(slopes, K_b, x_mean, x_std, y_std, holdout, slope_names)
+        sx_t, sT_t = torch.tensor(sx, dtype=torch.float32), torch.tensor(sT, dtype=torch.float32)
+        svm = torch.from_numpy(sval)
+        s_tr, sT_tr, s_va, sT_va = sx_t[~svm], sT_t[~svm], sx_t[svm], sT_t[svm]
+        dirs = torch.tensor(slope_tangents(x_std, X.shape[1], slope_names), dtype=torch.float32)  # (d, n_in)
+        s_batch = max(1, round(batch * len(s_tr) / max(1, len(x_tr)) * 8))
+        log(f"slopes: {len(s_tr)} states in the fit, {len(s_va)} held out, {len(dirs)} directions each, "
+            f"{s_batch} states per batch, weight {slope_weight}")
+
+    def slope_loss(xs, Ts):
+        """Mean square of the normalised slope error at the states ``xs`` (m, n_in) against ``Ts`` (m, d, 12)."""
+        h = xs
+        T = dirs.unsqueeze(0).expand(len(xs), -1, -1)
+        for m in net:
+            if isinstance(m, torch.nn.Linear):
+                h = m(h)
+                T = T @ m.weight.T
+            else:
+                h = torch.tanh(h)
+                T = T * (1.0 - h * h).unsqueeze(1)
+        return torch.mean((T[:, :, :12] - Ts) ** 2)
+
     gen = torch.Generator().manual_seed(seed)
     best = (float("inf"), None, -1)
+    best_parts = (float("nan"), float("nan"))
     t0 = time.perf_counter()
     for epoch in range(epochs):
         order = torch.randperm(len(x_tr), generator=gen)
@@ -178,16 +274,22 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
             idx = order[k:k + batch]
             opt.zero_grad()
             loss = torch.mean((net(x_tr[idx]) - y_tr[idx]) ** 2)
+            if use_slopes:
+                sidx = torch.randint(len(s_tr), (s_batch,), generator=gen)
+                loss = loss + slope_weight * slope_loss(s_tr[sidx], sT_tr[sidx])
             loss.backward()
             opt.step()
         with torch.no_grad():
-            lv = float(torch.mean((net(x_va) - y_va) ** 2))
+            lf = float(torch.mean((net(x_va) - y_va) ** 2))
+            ls = float(slope_loss(s_va, sT_va)) if use_slopes else 0.0
+        lv = lf + slope_weight * ls
         sched.step(lv)
         if lv < best[0]:
             best = (lv, [p.detach().clone() for p in net.parameters()], epoch)
+            best_parts = (lf, ls)
         if epoch % 10 == 0 or epoch == epochs - 1:
-            log(f"epoch {epoch:4d}  held-out loss {lv:.5f}  best {best[0]:.5f} ({best[2]})  "
-                f"lr {opt.param_groups[0]['lr']:.1e}  {time.perf_counter() - t0:.0f} s")
+            log(f"epoch {epoch:4d}  held-out loss {lv:.5f} (forces {lf:.5f}, slopes {ls:.4f})  best {best[0]:.5f} "
+                f"({best[2]})  lr {opt.param_groups[0]['lr']:.1e}  {time.perf_counter() - t0:.0f} s")
         if opt.param_groups[0]["lr"] < lr / 64:
             break
     with torch.no_grad():
@@ -199,7 +301,10 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
     from kite_env.surrogate.model import output_errors
 
     report = output_errors(Y_all[val], pred)
-    report.update({"best_epoch": best[2], "held_out_loss": best[0], "fit_s": time.perf_counter() - t0,
+    report.update({"best_epoch": best[2], "held_out_loss": best[0], "held_out_force_loss": best_parts[0],
+                   "held_out_slope_loss": best_parts[1] if use_slopes else None, "slope_weight": slope_weight,
+                   "slope_directions": [SLOPE_DIRECTIONS[k][1] for k in _picked(slope_names)] if use_slopes else None,
+                   "fit_s": time.perf_counter() - t0,
                    "n_train": int((~val).sum()), "n_val": int(val.sum()), "hidden": list(hidden), "seed": seed,
                    "holdout": holdout, "epochs": epochs, "lr": lr, "batch": batch})
     lo, hi = X[~val].min(0), X[~val].max(0)

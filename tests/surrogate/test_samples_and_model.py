@@ -367,6 +367,92 @@ def test_fit_mlp_fits_a_smooth_map_on_top_of_the_known_linear_part():
     assert np.sqrt(np.mean((mlp[:, :12] - smooth[val, :12]) ** 2)) == pytest.approx(err["force_rms_N"], rel=1e-6)
 
 
+
+def _slope_of(wing, X, direction):
+    """Derivative of the wing's bridle force along ``direction`` (raw inputs) at the rows of ``X``, by central
+    differences of its prediction."""
+    e = 1e-4
+    return (wing.predict(X + e * direction)[:, :12] - wing.predict(X - e * direction)[:, :12]) / (2 * e)
+
+
+def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
+    """Two inputs move together in every sample (the apparent velocity's x and z, as pitch and load move together
+    under the force loop): the forces fix only the sum of their effects. Fitted with the static wing's slopes at a
+    fifth of the states (kite_env.fitting.jacobians' layout: dF_b/dq_b then dF_b/dv_app), the wing's derivative along
+    each is the given one, on held-out states too; fitted to the forces alone it is not. The forces fit as well."""
+    from kite_env.fitting.fit import slope_directions
+
+    rng = np.random.default_rng(5)
+    n_ep, per = 40, 60
+    n = n_ep * per
+    X = rng.normal(size=(n, 48))
+    X[:, 26] = X[:, 24]  # collinear in the data
+    a, c = rng.normal(0.0, 300.0, 12), rng.normal(0.0, 300.0, 12)  # dF/dv_x, dF/dv_z, the truth
+    Y = np.zeros((n, 17))
+    Y[:, :12] = np.outer(X[:, 24], a) + np.outer(X[:, 26], c) + 200.0 * np.tanh(X[:, 25:26])
+    Y[:, 12:] = rng.normal(size=(n, 5))
+    group = np.repeat(np.arange(n_ep), per)
+    K_b = rng.normal(0.0, 2e3, (12, 12))
+    Y[:, :12] += X[:, :12] @ K_b.T
+    data = FitData(X, Y, group, {})
+    states = np.arange(0, n, 5)
+    J = np.zeros((len(states), 12, 15))
+    J[:, :, :12] = K_b
+    J[:, :, 12], J[:, :, 14] = a, c
+    J[:, :, 13] = 200.0 / np.cosh(X[states, 25])[:, None] ** 2
+    slopes = {"inputs": X[states], "J": J, "group": group[states]}
+    val = group % 5 == 4
+    U = slope_directions(48)
+    res = {}
+    for weight in (0.0, 1.0):
+        W, b, norms, report = fit_mlp(data, hidden=(32, 32), epochs=40, batch=64, lr=3e-3, K_b=K_b, slopes=slopes,
+                                      slope_weight=weight, log=lambda m: None)
+        wing = SurrogateWing(W, b, *norms, {"history": {"taus_s": [0.05, 0.25], "filtered": list(range(9))}}, K_b)
+        Xv = X[val][:50]
+        res[weight] = (report, [_slope_of(wing, Xv, U[d]) for d in (6, 8)])
+    for weight in (0.0, 1.0):
+        report, (sx, sz) = res[weight]
+        err = max(np.sqrt(np.mean((sx - a) ** 2)), np.sqrt(np.mean((sz - c) ** 2))) / np.sqrt(np.mean(a**2 + c**2))
+        res[weight] = (report, err)
+    assert res[1.0][1] < 0.1, res
+    assert res[0.0][1] > 3 * res[1.0][1], res
+    assert res[1.0][0]["force_rms_N"] < 1.2 * res[0.0][0]["force_rms_N"] + 5.0
+    assert res[1.0][0]["held_out_slope_loss"] is not None and res[0.0][0]["held_out_slope_loss"] is None
+
+
+def test_the_static_wings_slopes_at_a_recorded_state(tape):
+    """kite-fit slopes at a recorded state of the full model: the inputs are the tape's, the derivatives in the
+    apparent velocity converge with the difference step, and the bridle stiffness (the solve's condensed tangent) is
+    the central difference of the solve along a deformation that keeps frame K (the twist, B up and D down)."""
+    from kite_env.fitting.jacobians import DV_MPS, JAC_INPUTS, tape_jacobians
+    from kite_env.fsi import nominal_wing
+
+    arrays, meta, _ = tape
+    cfg = load_config(None)
+    wing = nominal_wing(cfg.kite.name, cfg)
+    res = tape_jacobians(arrays, meta, cfg, wing, every=10)
+    assert res["failed"] == 0 and list(res["rows"]) == [10] and res["J"].shape == (1, 12, len(JAC_INPUTS))
+    _, q0, tips = _geometry(cfg)
+    X, _, _ = tape_samples(arrays, cfg, q0, tips)
+    np.testing.assert_allclose(res["inputs"][0, :30], X[10])
+    q_b = wing.design_bridle + X[10, :12].reshape(4, 3)
+
+    def solve(q, v):
+        return np.asarray(wing.solve(q, FlightState(v_kite=v, omega=X[10, 27:30], v_wind=np.zeros(3)), dt=None,
+                                     support="prescribed", warm=True, commit=False).F_b).ravel()
+
+    v = X[10, 24:27]
+    for j in range(3):
+        dv = np.zeros(3)
+        dv[j] = 0.4 * DV_MPS
+        fd = (solve(q_b, v + dv) - solve(q_b, v - dv)) / (2 * dv[j])
+        np.testing.assert_allclose(res["J"][0, :, 12 + j], fd, atol=0.02 * np.abs(fd).max())
+    twist = np.zeros((4, 3))
+    twist[1, 2], twist[3, 2] = 1.0, -1.0
+    e = 1e-4
+    fd = (solve(q_b + e * twist, v) - solve(q_b - e * twist, v)) / (2 * e)
+    np.testing.assert_allclose(res["J"][0, :, :12] @ twist.ravel(), fd, atol=0.02 * np.abs(fd).max())
+
 def test_the_agent_plan_flies_a_trained_agent_alone_and_with_held_offsets():
     """agent_plan: indexed apart from the other plans, the agent alone (60 s) and with held offsets of 0.1-0.4 (40 s)
     in turn, winds of the sampling plan, the same plan for the same seed; make_sampling_policy gives the agent with a
@@ -401,7 +487,8 @@ def test_the_agent_plan_flies_a_trained_agent_alone_and_with_held_offsets():
     env.close()
 
 
-@pytest.mark.parametrize("bad", [["--replay-s", "0"], ["--replay-every-s", "-1"], ["--out", "wing.txt"]])
+@pytest.mark.parametrize("bad", [["--replay-s", "0"], ["--replay-every-s", "-1"], ["--out", "wing.txt"],
+                                 ["--slope-weight", "-1"], ["--slope-directions", "v_app_x,pitch"]])
 def test_kite_fit_refuses_bad_fit_options_before_reading_anything(tmp_path, capsys, bad):
     """``kite-fit fit`` with a replay of no length, a negative spacing or an output that is not .npz: exit 2 with one
     line naming the option, before a tape is read or a file written."""
@@ -413,8 +500,25 @@ def test_kite_fit_refuses_bad_fit_options_before_reading_anything(tmp_path, caps
         args = args[:5]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and ("--replay" in err[0] or ".npz" in err[0])
+    assert len(err) == 1 and any(k in err[0] for k in ("--replay", ".npz", "--slope-weight", "'pitch'"))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_kite_fit_slopes_and_a_fit_that_needs_them(tape, tmp_path, capsys):
+    """``kite-fit fit --slope-weight`` without ``kite-fit slopes`` of the tapes: exit 2 naming the command that makes
+    them, nothing written; ``kite-fit slopes --every-s 0``: exit 2."""
+    from kite_env.cli.fit import main
+
+    arrays, meta, _ = tape
+    (tmp_path / "tapes").mkdir()
+    save_tape(tmp_path / "tapes" / "ep_0003.npz", arrays, meta)
+    assert main(["fit", "--tapes", str(tmp_path / "tapes"), "--out", str(tmp_path / "w.npz"),
+                 "--slope-weight", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "kite-fit slopes --tapes" in err[0]
+    assert main(["slopes", "--tapes", str(tmp_path / "tapes"), "--every-s", "0"]) == 2
+    assert "--every-s" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["ep_0003.npz", "tapes"]
 
 
 def test_the_depower_plan_excites_the_force_loop_with_held_offsets():

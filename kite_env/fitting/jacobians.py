@@ -1,0 +1,170 @@
+"""The static aeroelastic wing's force derivatives at recorded states: targets for the reduced-order wing's slopes.
+
+Recorded flights fix the reduced-order wing's force at the states flown, but hardly how that force changes with the
+angle of attack: in every flight the force loop (Eq. 19) moves the common steering length, hence the wing's pitch,
+from the force ratio, so pitch and load move together and a fit cannot tell cause from effect (closed-loop
+identification; Ljung, *System Identification: Theory for the User*, 2nd ed., 1999, Ch. 13). At recorded states of
+the full model's flights the shipped wing's force changes with a rigid pitch of the inflow 1.7-2.6 times as much as
+the static FE wing's (docs/fast_fidelity.md, "The wing's slopes").
+
+The wing with inertia and the static aeroelastic wing are one structure and one load model; slowly changed, the
+former's force follows the latter's. So the static wing's derivatives at a recorded state are the low-frequency
+(steady-state) derivatives of the effective wing force there:
+
+* ``dF_b / dq_b`` (12 x 12): :meth:`kite_env.fsi.AeroelasticWing.bridle_stiffness`, the condensed tangent of the
+  structure and the aero load with A-D prescribed (what the known linear part ``K_b`` holds at one state only);
+* ``dF_b / dv_app`` (12 x 3): central differences of the static solve in the apparent velocity (frame K), its
+  direction being the angle of attack and sideslip.
+
+:func:`fitting.fit.fit_mlp` fits the MLP's derivatives with respect to its *current* inputs (the latent filters held:
+at a steady state the filtered inputs move with the current ones, so their differences ``z - x`` stay) to these,
+beside the forces ("Sobolev training": Czarnecki, Osindero, Jaderberg, Swirszcz & Pascanu, "Sobolev training for
+neural networks", NeurIPS 2017).
+
+Each tape ``DIR/ep_XXXX.npz`` gets ``DIR/jacobians/ep_XXXX.npz``: the rows, the derivatives and the static wing's
+force there (as a check: it lies within some per cent of the recorded effective force), with the model they belong
+to.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: the inputs (indices into :data:`kite_env.surrogate.samples.INPUT_NAMES`) whose derivatives are targets: the
+#: bridle points' deformation (12) and the apparent velocity (3)
+JAC_INPUTS = tuple(range(12)) + (24, 25, 26)
+#: central-difference step of the apparent velocity [m/s] (0.5 deg of inflow angle at 30 m/s)
+DV_MPS = 0.25
+
+
+def tape_jacobians(arrays: dict, meta: dict, cfg, wing, every: int) -> dict:
+    """Derivatives of the static wing's ``F_b`` (frame K) at every ``every``-th row of one tape.
+
+    Returns ``{"rows" (m,), "inputs" (m, 30 + history) the reduced-order wing's inputs there, "J" (m, 12, 15) [N/m,
+    N s/m] with columns :data:`JAC_INPUTS`, "F_static" (m, 12), "failed" int}``. A state where the static solve does
+    not converge (a luffing or stalled wing, a slack line) is skipped and counted: the static wing has no equilibrium
+    there, so it gives no slope."""
+    from kite_env.fitting.fit import latent_features, tape_samples
+    from kite_env.fsi import FlightState, WingConvergenceError
+
+    q0 = wing.design_bridle
+    tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
+    X, _, ok = tape_samples(arrays, cfg, q0, tips)
+    H = latent_features(X, cfg.dynamics.dt_s)
+    rows, Js, Fs, failed = [], [], [], 0
+    warm = False
+    for k in range(0, len(X), every):
+        if not ok[k]:
+            continue
+        x = X[k]
+        q_b = q0 + x[:12].reshape(4, 3)
+        v_app, om = x[24:27], x[27:30]
+
+        def flight(v, om=om):
+            return FlightState(v_kite=np.asarray(v, float), omega=om, v_wind=np.zeros(3))
+
+        try:
+            sol = None
+            if warm:
+                try:
+                    sol = wing.solve(q_b, flight(v_app), dt=None, support="prescribed", warm=True, commit=True)
+                except WingConvergenceError:
+                    sol = None
+            if sol is None:
+                # from the unloaded wing: the static equilibrium at the design bridle in this inflow, then the state
+                wing.reset()
+                wing.solve(None, flight(v_app), dt=None, support="prescribed", warm=False, commit=True)
+                sol = wing.solve(q_b, flight(v_app), dt=None, support="prescribed", warm=True, commit=True)
+            F0 = np.asarray(sol.F_b, float).ravel()
+            J = np.empty((12, len(JAC_INPUTS)))
+            J[:, :12] = wing.bridle_stiffness()
+            for j in range(3):
+                dv = np.zeros(3)
+                dv[j] = DV_MPS
+                Fp = np.asarray(wing.solve(q_b, flight(v_app + dv), dt=None, support="prescribed", warm=True,
+                                           commit=False).F_b, float).ravel()
+                Fm = np.asarray(wing.solve(q_b, flight(v_app - dv), dt=None, support="prescribed", warm=True,
+                                           commit=False).F_b, float).ravel()
+                J[:, 12 + j] = (Fp - Fm) / (2.0 * DV_MPS)
+            warm = True
+        except WingConvergenceError:
+            failed += 1
+            warm = False
+            continue
+        rows.append(k)
+        Js.append(J)
+        Fs.append(F0)
+    rows = np.asarray(rows, dtype=np.int64)
+    return {"rows": rows, "inputs": np.hstack([X, H])[rows], "J": np.asarray(Js).reshape(-1, 12, len(JAC_INPUTS)),
+            "F_static": np.asarray(Fs).reshape(-1, 12), "failed": failed}
+
+
+def jacobian_path(tape: Path) -> Path:
+    return tape.parent / "jacobians" / tape.name
+
+
+def compute_jacobians(tape_dir: str | Path | None, cfg, every_s: float = 1.0, tapes=None, log=print) -> int:
+    """:func:`tape_jacobians` of every tape of ``tape_dir`` (or of the paths ``tapes``) that has none yet, every
+    ``every_s`` seconds of flight; written to ``DIR/jacobians/`` (atomically, one file per tape). Returns the number
+    of tapes done."""
+    from kite_env.config import check_model, fingerprint
+    from kite_env.fitting.trajectories import load_tape
+    from kite_env.fsi import nominal_wing
+
+    wing = nominal_wing(cfg.kite.name, cfg)
+    if tapes is None and tape_dir is None:
+        raise ValueError("compute_jacobians needs a tape folder or a list of tapes")
+    paths = sorted(Path(tape_dir).glob("ep_*.npz")) if tapes is None else [Path(p) for p in tapes]  # type: ignore[arg-type]
+    every = max(1, round(every_s / cfg.dynamics.dt_s))
+    done = 0
+    for path in paths:
+        if path.name.endswith(".part.npz"):
+            continue
+        out = jacobian_path(path)
+        if out.exists():
+            continue
+        arrays, meta = load_tape(path)
+        check_model(meta.get("model"), cfg, f"tape '{path}'")
+        t0 = time.perf_counter()
+        res = tape_jacobians(arrays, meta, cfg, wing, every)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(".part.npz")
+        np.savez_compressed(tmp, rows=res["rows"], inputs=res["inputs"], J=res["J"], F_static=res["F_static"],
+                            meta=json.dumps({"model": fingerprint(cfg), "tape": path.name,
+                                             "index": meta["plan"]["index"], "every": every,
+                                             "dv_mps": DV_MPS, "inputs": list(JAC_INPUTS),
+                                             "failed": res["failed"]}))
+        tmp.replace(out)
+        done += 1
+        log(f"{path.name}: {len(res['rows'])} states, {res['failed']} without a static equilibrium, "
+            f"{time.perf_counter() - t0:.0f} s")
+    return done
+
+
+def load_jacobians(tape_dir: str | Path, cfg, indices) -> dict | None:
+    """The derivatives of ``DIR/jacobians/ep_*.npz`` whose tape's episode index is in ``indices`` (the tapes of the
+    fit): ``{"inputs" (m, n_in), "J" (m, 12, 15), "group" (m,) episode index}``, or None where there are none."""
+    from kite_env.config import check_model
+
+    keep = set(int(i) for i in indices)
+    X, Js, G = [], [], []
+    for f in sorted((Path(tape_dir) / "jacobians").glob("ep_*.npz")):
+        if f.name.endswith(".part.npz"):
+            continue
+        with np.load(f, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if int(meta["index"]) not in keep:
+                continue
+            check_model(meta.get("model"), cfg, f"jacobians '{f}'")
+            if tuple(meta["inputs"]) != JAC_INPUTS:
+                raise ValueError(f"jacobians '{f}' hold other inputs' derivatives ({meta['inputs']})")
+            X.append(z["inputs"])
+            Js.append(z["J"])
+            G.append(np.full(len(z["rows"]), int(meta["index"])))
+    if not X:
+        return None
+    return {"inputs": np.vstack(X), "J": np.concatenate(Js), "group": np.concatenate(G)}
