@@ -2,7 +2,7 @@
 states of the full model (``kite-fit slopes``; docs/fast_fidelity.md, "The wing's slopes").
 
 For each direction of :data:`kite_env.fitting.fit.SLOPE_DIRECTIONS` (the bridle points' deformations that keep frame
-K, the apparent velocity) and each state: the derivative of the 12 bridle-force components, the static wing's from
+K, the apparent velocity, the rotation rate) and each state: the derivative of the 12 bridle-force components, the static wing's from
 its solve there (``DIR/jacobians``) and the reduced-order wing's (its MLP's tangent at the state, latent filters
 held, plus its known linear part). Prints, per direction, the median over the states of the static wing's norm, the
 reduced-order wing's and their difference relative to the static wing's; then the lift slope (the total force
@@ -67,7 +67,7 @@ def main() -> None:
             a = np.linalg.norm(Jd[:, d], axis=1)
             b = np.linalg.norm(Jw[:, d], axis=1)
             e = np.linalg.norm(Jd[:, d] - Jw[:, d], axis=1) / np.maximum(a, 1e-9)
-            unit = "N/m" if d < 6 else "N s/m"
+            unit = "N/m" if d < 6 else ("N s/m" if name.startswith("v_app") else "N s/rad")
             print(f"| {name} | {np.median(a):,.0f} {unit} | {np.median(b):,.0f} | {np.median(e):.2f} |")
         lift_fe, lift_w = Jd[:, 8, 2::3].sum(axis=1), Jw[:, 8, 2::3].sum(axis=1)
         print(f"lift slope, total z force per m/s of v_app_z: static {np.median(lift_fe):.0f}, reduced-order "

@@ -146,13 +146,15 @@ def _q(point: str, axis: str) -> int:
 #: the directions of the wing's slopes fitted with ``slopes`` (rows: weights on :data:`kite_env.surrogate.samples.
 #: INPUT_NAMES`' first 30; names): the bridle points' deformations that keep frame K (A and C stay on its y axis
 #: symmetric about the origin, the midpoint of B and D in its x-y plane: :func:`kite_env.frames.kite_frame`; any
-#: other change of q_b also moves K, and the inputs, which are in K, cannot take it) and the apparent velocity
+#: other change of q_b also moves K, and the inputs, which are in K, cannot take it), the apparent velocity and the
+#: rotation rate
 SLOPE_DIRECTIONS: tuple[tuple[dict[int, float], str], ...] = (
     ({_q("A", "y"): 1.0, _q("C", "y"): -1.0}, "span"),
     ({_q("B", "x"): 1.0}, "B_x"), ({_q("B", "y"): 1.0}, "B_y"),
     ({_q("D", "x"): 1.0}, "D_x"), ({_q("D", "y"): 1.0}, "D_y"),
     ({_q("B", "z"): 1.0, _q("D", "z"): -1.0}, "twist"),
     ({24: 1.0}, "v_app_x"), ({25: 1.0}, "v_app_y"), ({26: 1.0}, "v_app_z"),
+    ({27: 1.0}, "omega_x"), ({28: 1.0}, "omega_y"), ({29: 1.0}, "omega_z"),
 )
 
 
@@ -194,7 +196,7 @@ def slope_targets(slopes: dict, K_b, x_mean, x_std, y_std, holdout: int, names=N
     from kite_env.fitting.jacobians import JAC_INPUTS
 
     X = slopes["inputs"]
-    U = slope_directions(X.shape[1], names)[:, list(JAC_INPUTS)]  # (d, 15)
+    U = slope_directions(X.shape[1], names)[:, list(JAC_INPUTS)]  # (d, len(JAC_INPUTS))
     T = np.einsum("mij,dj->mdi", slopes["J"], U)
     if K_b is not None:
         T = T - (U[:, :12] @ np.asarray(K_b).T)[None, :, :]

@@ -14,7 +14,9 @@ former's force follows the latter's. So the static wing's derivatives at a recor
 * ``dF_b / dq_b`` (12 x 12): :meth:`kite_env.fsi.AeroelasticWing.bridle_stiffness`, the condensed tangent of the
   structure and the aero load with A-D prescribed (what the known linear part ``K_b`` holds at one state only);
 * ``dF_b / dv_app`` (12 x 3): central differences of the static solve in the apparent velocity (frame K), its
-  direction being the angle of attack and sideslip.
+  direction being the angle of attack and sideslip;
+* ``dF_b / domega`` (12 x 3): central differences in the rotation rate of K, which the static wing's sections see as
+  inflow (Eq. 2's ``omega x r``): its quasi-steady aerodynamic damping.
 
 :func:`fitting.fit.fit_mlp` fits the MLP's derivatives with respect to its *current* inputs (the latent filters held:
 at a steady state the filtered inputs move with the current ones, so their differences ``z - x`` stay) to these,
@@ -35,17 +37,19 @@ from pathlib import Path
 import numpy as np
 
 #: the inputs (indices into :data:`kite_env.surrogate.samples.INPUT_NAMES`) whose derivatives are targets: the
-#: bridle points' deformation (12) and the apparent velocity (3)
-JAC_INPUTS = tuple(range(12)) + (24, 25, 26)
+#: bridle points' deformation (12), the apparent velocity (3) and the rotation rate (3)
+JAC_INPUTS = tuple(range(12)) + (24, 25, 26, 27, 28, 29)
 #: central-difference step of the apparent velocity [m/s] (0.5 deg of inflow angle at 30 m/s)
 DV_MPS = 0.25
+#: central-difference step of the rotation rate [rad/s] (0.25 m/s at the tips, 5 m from the origin)
+DOMEGA_RPS = 0.05
 
 
 def tape_jacobians(arrays: dict, meta: dict, cfg, wing, every: int) -> dict:
     """Derivatives of the static wing's ``F_b`` (frame K) at every ``every``-th row of one tape.
 
-    Returns ``{"rows" (m,), "inputs" (m, 30 + history) the reduced-order wing's inputs there, "J" (m, 12, 15) [N/m,
-    N s/m] with columns :data:`JAC_INPUTS`, "F_static" (m, 12), "failed" int}``. A state where the static solve does
+    Returns ``{"rows" (m,), "inputs" (m, 30 + history) the reduced-order wing's inputs there, "J" (m, 12, 18) [N/m,
+    N s/m, N s/rad] with columns :data:`JAC_INPUTS`, "F_static" (m, 12), "failed" int}``. A state where the static solve does
     not converge (a luffing or stalled wing, a slack line) is skipped and counted: the static wing has no equilibrium
     there, so it gives no slope."""
     from kite_env.fitting.fit import latent_features, tape_samples
@@ -64,8 +68,8 @@ def tape_jacobians(arrays: dict, meta: dict, cfg, wing, every: int) -> dict:
         q_b = q0 + x[:12].reshape(4, 3)
         v_app, om = x[24:27], x[27:30]
 
-        def flight(v, om=om):
-            return FlightState(v_kite=np.asarray(v, float), omega=om, v_wind=np.zeros(3))
+        def flight(v, w=om):
+            return FlightState(v_kite=np.asarray(v, float), omega=np.asarray(w, float), v_wind=np.zeros(3))
 
         try:
             sol = None
@@ -82,14 +86,16 @@ def tape_jacobians(arrays: dict, meta: dict, cfg, wing, every: int) -> dict:
             F0 = np.asarray(sol.F_b, float).ravel()
             J = np.empty((12, len(JAC_INPUTS)))
             J[:, :12] = wing.bridle_stiffness()
-            for j in range(3):
-                dv = np.zeros(3)
-                dv[j] = DV_MPS
-                Fp = np.asarray(wing.solve(q_b, flight(v_app + dv), dt=None, support="prescribed", warm=True,
+            for j in range(6):
+                h = DV_MPS if j < 3 else DOMEGA_RPS
+                d = np.zeros(3)
+                d[j % 3] = h
+                plus, minus = ((v_app + d, om), (v_app - d, om)) if j < 3 else ((v_app, om + d), (v_app, om - d))
+                Fp = np.asarray(wing.solve(q_b, flight(*plus), dt=None, support="prescribed", warm=True,
                                            commit=False).F_b, float).ravel()
-                Fm = np.asarray(wing.solve(q_b, flight(v_app - dv), dt=None, support="prescribed", warm=True,
+                Fm = np.asarray(wing.solve(q_b, flight(*minus), dt=None, support="prescribed", warm=True,
                                            commit=False).F_b, float).ravel()
-                J[:, 12 + j] = (Fp - Fm) / (2.0 * DV_MPS)
+                J[:, 12 + j] = (Fp - Fm) / (2.0 * h)
             warm = True
         except WingConvergenceError:
             failed += 1
@@ -136,7 +142,7 @@ def compute_jacobians(tape_dir: str | Path | None, cfg, every_s: float = 1.0, ta
         np.savez_compressed(tmp, rows=res["rows"], inputs=res["inputs"], J=res["J"], F_static=res["F_static"],
                             meta=json.dumps({"model": fingerprint(cfg), "tape": path.name,
                                              "index": meta["plan"]["index"], "every": every,
-                                             "dv_mps": DV_MPS, "inputs": list(JAC_INPUTS),
+                                             "dv_mps": DV_MPS, "domega_rps": DOMEGA_RPS, "inputs": list(JAC_INPUTS),
                                              "failed": res["failed"]}))
         tmp.replace(out)
         done += 1

@@ -378,7 +378,7 @@ def _slope_of(wing, X, direction):
 def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
     """Two inputs move together in every sample (the apparent velocity's x and z, as pitch and load move together
     under the force loop): the forces fix only the sum of their effects. Fitted with the static wing's slopes at a
-    fifth of the states (kite_env.fitting.jacobians' layout: dF_b/dq_b then dF_b/dv_app), the wing's derivative along
+    fifth of the states (kite_env.fitting.jacobians' layout: dF_b/dq_b, dF_b/dv_app, dF_b/domega), the wing's derivative along
     each is the given one, on held-out states too; fitted to the forces alone it is not. The forces fit as well."""
     from kite_env.fitting.fit import slope_directions
 
@@ -396,7 +396,7 @@ def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
     Y[:, :12] += X[:, :12] @ K_b.T
     data = FitData(X, Y, group, {})
     states = np.arange(0, n, 5)
-    J = np.zeros((len(states), 12, 15))
+    J = np.zeros((len(states), 12, 18))  # the map does not depend on the rotation rate
     J[:, :, :12] = K_b
     J[:, :, 12], J[:, :, 14] = a, c
     J[:, :, 13] = 200.0 / np.cosh(X[states, 25])[:, None] ** 2
@@ -422,9 +422,9 @@ def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
 
 def test_the_static_wings_slopes_at_a_recorded_state(tape):
     """kite-fit slopes at a recorded state of the full model: the inputs are the tape's, the derivatives in the
-    apparent velocity converge with the difference step, and the bridle stiffness (the solve's condensed tangent) is
+    apparent velocity and the rotation rate converge with the difference step, and the bridle stiffness (the solve's condensed tangent) is
     the central difference of the solve along a deformation that keeps frame K (the twist, B up and D down)."""
-    from kite_env.fitting.jacobians import DV_MPS, JAC_INPUTS, tape_jacobians
+    from kite_env.fitting.jacobians import DOMEGA_RPS, DV_MPS, JAC_INPUTS, tape_jacobians
     from kite_env.fsi import nominal_wing
 
     arrays, meta, _ = tape
@@ -437,16 +437,19 @@ def test_the_static_wings_slopes_at_a_recorded_state(tape):
     np.testing.assert_allclose(res["inputs"][0, :30], X[10])
     q_b = wing.design_bridle + X[10, :12].reshape(4, 3)
 
-    def solve(q, v):
-        return np.asarray(wing.solve(q, FlightState(v_kite=v, omega=X[10, 27:30], v_wind=np.zeros(3)), dt=None,
+    def solve(q, v, w=X[10, 27:30]):
+        return np.asarray(wing.solve(q, FlightState(v_kite=v, omega=w, v_wind=np.zeros(3)), dt=None,
                                      support="prescribed", warm=True, commit=False).F_b).ravel()
 
-    v = X[10, 24:27]
+    v, w = X[10, 24:27], X[10, 27:30]
     for j in range(3):
-        dv = np.zeros(3)
-        dv[j] = 0.4 * DV_MPS
-        fd = (solve(q_b, v + dv) - solve(q_b, v - dv)) / (2 * dv[j])
+        d = np.zeros(3)
+        d[j] = 0.4 * DV_MPS
+        fd = (solve(q_b, v + d) - solve(q_b, v - d)) / (2 * d[j])
         np.testing.assert_allclose(res["J"][0, :, 12 + j], fd, atol=0.02 * np.abs(fd).max())
+        d[j] = 0.4 * DOMEGA_RPS
+        fd = (solve(q_b, v, w + d) - solve(q_b, v, w - d)) / (2 * d[j])
+        np.testing.assert_allclose(res["J"][0, :, 15 + j], fd, atol=0.02 * np.abs(fd).max())
     twist = np.zeros((4, 3))
     twist[1, 2], twist[3, 2] = 1.0, -1.0
     e = 1e-4
