@@ -2,11 +2,11 @@
 states of the full model (``kite-fit slopes``; docs/fast_fidelity.md, "The wing's slopes").
 
 For each direction of :data:`kite_env.fitting.fit.SLOPE_DIRECTIONS` (the bridle points' deformations that keep frame
-K, the apparent velocity, the rotation rate) and each state: the derivative of the 12 bridle-force components, the static wing's from
-its solve there (``DIR/jacobians``) and the reduced-order wing's (its MLP's tangent at the state, latent filters
-held, plus its known linear part). Prints, per direction, the median over the states of the static wing's norm, the
-reduced-order wing's and their difference relative to the static wing's; then the lift slope (the total force
-normal to the chord per m/s of the apparent velocity's normal component) of both.
+K, the apparent velocity, the rotation rate) and each state: the derivative of the 12 bridle-force components, the
+static wing's from its solve there (``DIR/jacobians``) and the reduced-order wing's (its MLP's tangent at the state,
+latent filters held, plus its known linear part). Prints, per direction, the median over the states of the static
+wing's norm, the reduced-order wing's and their difference relative to the static wing's; then the lift slope (the
+total force normal to the chord per m/s of the apparent velocity's normal component) of both.
 
     .venv/bin/python analyses/wing_slopes.py --tapes runs/tapes [--surrogate FILE.npz ...] [--held-out]
 

@@ -48,10 +48,10 @@ DOMEGA_RPS = 0.05
 def tape_jacobians(arrays: dict, meta: dict, cfg, wing, every: int) -> dict:
     """Derivatives of the static wing's ``F_b`` (frame K) at every ``every``-th row of one tape.
 
-    Returns ``{"rows" (m,), "inputs" (m, 30 + history) the reduced-order wing's inputs there, "J" (m, 12, 18) [N/m,
-    N s/m, N s/rad] with columns :data:`JAC_INPUTS`, "F_static" (m, 12), "failed" int}``. A state where the static solve does
-    not converge (a luffing or stalled wing, a slack line) is skipped and counted: the static wing has no equilibrium
-    there, so it gives no slope."""
+    Returns ``{"rows" (m,), "inputs" (m, 30 + history) the reduced-order wing's inputs there, "J" (m, 12, 18)
+    [N/m, N s/m, N s/rad] with columns :data:`JAC_INPUTS`, "F_static" (m, 12), "failed" int}``. A state where the
+    static solve does not converge (a luffing or stalled wing, a slack line) is skipped and counted: the static wing
+    has no equilibrium there, so it gives no slope."""
     from kite_env.fitting.fit import latent_features, tape_samples
     from kite_env.fsi import FlightState, WingConvergenceError
 

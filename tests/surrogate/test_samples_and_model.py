@@ -378,8 +378,9 @@ def _slope_of(wing, X, direction):
 def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
     """Two inputs move together in every sample (the apparent velocity's x and z, as pitch and load move together
     under the force loop): the forces fix only the sum of their effects. Fitted with the static wing's slopes at a
-    fifth of the states (kite_env.fitting.jacobians' layout: dF_b/dq_b, dF_b/dv_app, dF_b/domega), the wing's derivative along
-    each is the given one, on held-out states too; fitted to the forces alone it is not. The forces fit as well."""
+    fifth of the states (kite_env.fitting.jacobians' layout: dF_b/dq_b, dF_b/dv_app, dF_b/domega), the wing's
+    derivative along each is the given one, on held-out states too; fitted to the forces alone it is not. The forces
+    fit as well."""
     from kite_env.fitting.fit import slope_directions
 
     rng = np.random.default_rng(5)
@@ -422,8 +423,9 @@ def test_the_fit_takes_the_slopes_that_the_data_cannot_tell():
 
 def test_the_static_wings_slopes_at_a_recorded_state(tape):
     """kite-fit slopes at a recorded state of the full model: the inputs are the tape's, the derivatives in the
-    apparent velocity and the rotation rate converge with the difference step, and the bridle stiffness (the solve's condensed tangent) is
-    the central difference of the solve along a deformation that keeps frame K (the twist, B up and D down)."""
+    apparent velocity and the rotation rate converge with the difference step, and the bridle stiffness (the solve's
+    condensed tangent) is the central difference of the solve along a deformation that keeps frame K (the twist, B up
+    and D down)."""
     from kite_env.fitting.jacobians import DOMEGA_RPS, DV_MPS, JAC_INPUTS, tape_jacobians
     from kite_env.fsi import nominal_wing
 
