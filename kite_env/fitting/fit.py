@@ -283,7 +283,7 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
             opt.step()
         with torch.no_grad():
             lf = float(torch.mean((net(x_va) - y_va) ** 2))
-            ls = float(slope_loss(s_va, sT_va)) if use_slopes else 0.0
+            ls = float(slope_loss(s_va, sT_va)) if use_slopes and len(s_va) else 0.0
         lv = lf + slope_weight * ls
         sched.step(lv)
         if lv < best[0]:
