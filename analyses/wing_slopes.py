@@ -51,7 +51,7 @@ def main() -> None:
     p.add_argument("--held-out", action="store_true")
     args = p.parse_args()
     cfg = load_config(None)
-    s = load_jacobians(args.tapes, cfg, range(100000))
+    s = load_jacobians(args.tapes, cfg)
     if s is None:
         raise SystemExit(f"no slopes in '{args.tapes}/jacobians': run kite-fit slopes --tapes {args.tapes}")
     keep = (s["group"] % 5 == 4) if args.held_out else np.ones(len(s["group"]), bool)

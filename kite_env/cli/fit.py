@@ -79,7 +79,7 @@ def _fit(args) -> int:
         fit_mlp,
         reference_stiffness,
     )
-    from kite_env.fitting.trajectories import load_tape
+    from kite_env.fitting.trajectories import load_tape, tape_paths
     from kite_env.fsi import nominal_wing
     from kite_env.surrogate.model import SurrogateWing
     from kite_env.surrogate.samples import git_commit
@@ -96,10 +96,10 @@ def _fit(args) -> int:
         raise ValueError(f"--slope-weight must be >= 0, got {args.slope_weight}")
     slope_names = None
     if args.slope_directions is not None:
-        from kite_env.fitting.fit import _picked
+        from kite_env.fitting.fit import slope_indices
 
         slope_names = [n.strip() for n in args.slope_directions.split(",") if n.strip()]
-        _picked(slope_names)  # one line naming an unknown direction, before anything is read
+        slope_indices(slope_names)  # one line naming an unknown direction, before anything is read
     wing = nominal_wing(cfg.kite.name, cfg)
     data = build_dataset(args.tapes, cfg, wing, log=lambda m: print(m, flush=True))
     slopes = None
@@ -137,7 +137,7 @@ def _fit(args) -> int:
         n_new = 0
         dt = cfg.dynamics.dt_s  # the tapes' step
         horizon = max(1, round(args.replay_s / dt))
-        for path in sorted(Path(args.tapes).glob("ep_*.npz")):
+        for path in tape_paths(args.tapes):
             arrays, tmeta = load_tape(path)
             index = tmeta["plan"]["index"]
             if index % args.holdout == args.holdout - 1:
@@ -165,14 +165,15 @@ def _slopes_worker(args):
     from kite_env.config import load_config
     from kite_env.fitting.jacobians import compute_jacobians
 
-    return compute_jacobians(None, load_config(None, overrides), every_s, tapes=tapes,
-                             log=lambda m: print(m, flush=True))
+    return compute_jacobians(tapes, load_config(None, overrides), every_s, log=lambda m: print(m, flush=True))
 
 
 def _slopes(args, over) -> int:
     if args.every_s <= 0 or args.jobs < 1:
         raise ValueError(f"--every-s must be > 0 and --jobs at least 1, got {args.every_s} and {args.jobs}")
-    tapes = [p for p in sorted(Path(args.tapes).glob("ep_*.npz")) if not p.name.endswith(".part.npz")]
+    from kite_env.fitting.trajectories import tape_paths
+
+    tapes = tape_paths(args.tapes)
     if not tapes:
         raise FileNotFoundError(f"no tapes (ep_*.npz) in '{args.tapes}'")
     parts = [tapes[j::args.jobs] for j in range(args.jobs)]

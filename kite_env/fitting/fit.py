@@ -111,16 +111,14 @@ def build_dataset(tape_dir: str | Path, cfg, wing, taus=TAUS, accel: str = "cent
                   log=print) -> FitData:
     """All tapes of ``tape_dir`` as one data set (every ``every``-th row; the history along every row)."""
     from kite_env.config import check_model
-    from kite_env.fitting.trajectories import load_tape
+    from kite_env.fitting.trajectories import load_tape, tape_paths
 
     log(f"reading the tapes of '{tape_dir}'")
     q0 = wing.design_bridle
     tips = (float(np.linalg.norm(q0[0] - q0[1])), float(np.linalg.norm(q0[2] - q0[3])))
     Xs, Ys, G, eps = [], [], [], []
     t0 = time.perf_counter()
-    for path in sorted(Path(tape_dir).glob("ep_*.npz")):
-        if path.name.endswith(".part.npz"):
-            continue
+    for path in tape_paths(tape_dir):
         arrays, meta = load_tape(path)
         check_model(meta.get("model"), cfg, f"tape '{path}'")
         X, Y, ok = tape_samples(arrays, cfg, q0, tips, accel)
@@ -158,7 +156,9 @@ SLOPE_DIRECTIONS: tuple[tuple[dict[int, float], str], ...] = (
 )
 
 
-def _picked(names) -> list[int]:
+def slope_indices(names) -> list[int]:
+    """Indices into :data:`SLOPE_DIRECTIONS` of the directions named (None: all); an unknown name is a ValueError
+    naming it."""
     known = [n for _, n in SLOPE_DIRECTIONS]
     if names is None:
         return list(range(len(known)))
@@ -171,7 +171,7 @@ def _picked(names) -> list[int]:
 def slope_directions(n_in: int, names=None) -> np.ndarray:
     """(d, n_in) the directions of :data:`SLOPE_DIRECTIONS` (those named in ``names``; None: all) in the raw inputs
     (only current inputs: the latent filters' differences ``z - x`` stay, as at a steady state)."""
-    picked = _picked(names)
+    picked = slope_indices(names)
     U = np.zeros((len(picked), n_in))
     for d, k in enumerate(picked):
         for i, v in SLOPE_DIRECTIONS[k][0].items():
@@ -181,7 +181,7 @@ def slope_directions(n_in: int, names=None) -> np.ndarray:
 
 def _direction_scale(x_std: np.ndarray, names=None) -> np.ndarray:
     """(d,) the length of each direction: one standard deviation of its first input over the samples."""
-    return np.array([x_std[next(iter(SLOPE_DIRECTIONS[k][0]))] for k in _picked(names)])
+    return np.array([x_std[next(iter(SLOPE_DIRECTIONS[k][0]))] for k in slope_indices(names)])
 
 
 def slope_tangents(x_std: np.ndarray, n_in: int, names=None) -> np.ndarray:
@@ -305,7 +305,8 @@ def fit_mlp(data: FitData, hidden=(64, 64), epochs: int = 200, batch: int = 2048
     report = output_errors(Y_all[val], pred)
     report.update({"best_epoch": best[2], "held_out_loss": best[0], "held_out_force_loss": best_parts[0],
                    "held_out_slope_loss": best_parts[1] if use_slopes else None, "slope_weight": slope_weight,
-                   "slope_directions": [SLOPE_DIRECTIONS[k][1] for k in _picked(slope_names)] if use_slopes else None,
+                   "slope_directions": ([SLOPE_DIRECTIONS[k][1] for k in slope_indices(slope_names)]
+                                        if use_slopes else None),
                    "fit_s": time.perf_counter() - t0,
                    "n_train": int((~val).sum()), "n_val": int(val.sum()), "hidden": list(hidden), "seed": seed,
                    "holdout": holdout, "epochs": epochs, "lr": lr, "batch": batch})

@@ -113,23 +113,18 @@ def jacobian_path(tape: Path) -> Path:
     return tape.parent / "jacobians" / tape.name
 
 
-def compute_jacobians(tape_dir: str | Path | None, cfg, every_s: float = 1.0, tapes=None, log=print) -> int:
-    """:func:`tape_jacobians` of every tape of ``tape_dir`` (or of the paths ``tapes``) that has none yet, every
-    ``every_s`` seconds of flight; written to ``DIR/jacobians/`` (atomically, one file per tape). Returns the number
-    of tapes done."""
+def compute_jacobians(tapes, cfg, every_s: float = 1.0, log=print) -> int:
+    """:func:`tape_jacobians` of each of the ``tapes`` (paths, :func:`kite_env.fitting.trajectories.tape_paths`) that
+    has none yet, every ``every_s`` seconds of flight; written to ``jacobians/`` beside the tapes (atomically, one
+    file per tape). Returns the number of tapes done."""
     from kite_env.config import check_model, fingerprint
     from kite_env.fitting.trajectories import load_tape
     from kite_env.fsi import nominal_wing
 
     wing = nominal_wing(cfg.kite.name, cfg)
-    if tapes is None and tape_dir is None:
-        raise ValueError("compute_jacobians needs a tape folder or a list of tapes")
-    paths = sorted(Path(tape_dir).glob("ep_*.npz")) if tapes is None else [Path(p) for p in tapes]  # type: ignore[arg-type]
     every = max(1, round(every_s / cfg.dynamics.dt_s))
     done = 0
-    for path in paths:
-        if path.name.endswith(".part.npz"):
-            continue
+    for path in map(Path, tapes):
         out = jacobian_path(path)
         if out.exists():
             continue
@@ -151,19 +146,19 @@ def compute_jacobians(tape_dir: str | Path | None, cfg, every_s: float = 1.0, ta
     return done
 
 
-def load_jacobians(tape_dir: str | Path, cfg, indices) -> dict | None:
-    """The derivatives of ``DIR/jacobians/ep_*.npz`` whose tape's episode index is in ``indices`` (the tapes of the
-    fit): ``{"inputs" (m, n_in), "J" (m, 12, 15), "group" (m,) episode index}``, or None where there are none."""
+def load_jacobians(tape_dir: str | Path, cfg, indices=None) -> dict | None:
+    """The derivatives of ``DIR/jacobians/ep_*.npz`` whose tape's episode index is in ``indices`` (the tapes of
+    the fit; None: all): ``{"inputs" (m, n_in), "J" (m, 12, 18), "group" (m,) episode index}``, or None where there
+    are none."""
     from kite_env.config import check_model
+    from kite_env.fitting.trajectories import tape_paths
 
-    keep = set(int(i) for i in indices)
+    keep = None if indices is None else set(int(i) for i in indices)
     X, Js, G = [], [], []
-    for f in sorted((Path(tape_dir) / "jacobians").glob("ep_*.npz")):
-        if f.name.endswith(".part.npz"):
-            continue
+    for f in tape_paths(Path(tape_dir) / "jacobians"):
         with np.load(f, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-            if int(meta["index"]) not in keep:
+            if keep is not None and int(meta["index"]) not in keep:
                 continue
             check_model(meta.get("model"), cfg, f"jacobians '{f}'")
             if tuple(meta["inputs"]) != JAC_INPUTS:

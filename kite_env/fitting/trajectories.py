@@ -108,6 +108,11 @@ def save_tape(path: str | Path, arrays: dict, meta: dict) -> Path:
     return path
 
 
+def tape_paths(tape_dir: str | Path) -> list[Path]:
+    """The whole tapes of a folder (``ep_*.npz``, sorted; not the ``.part.npz`` that :func:`save_tape` is writing)."""
+    return [p for p in sorted(Path(tape_dir).glob("ep_*.npz")) if not p.name.endswith(".part.npz")]
+
+
 def load_tape(path: str | Path) -> tuple[dict, dict]:
     """``(arrays, meta)`` of a tape written by :func:`save_tape`."""
     with np.load(path, allow_pickle=False) as z:
